@@ -1,0 +1,3 @@
+from dynaslam2.cli import main
+
+raise SystemExit(main())
