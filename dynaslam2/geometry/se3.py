@@ -49,7 +49,7 @@ def so3_log(R: np.ndarray) -> np.ndarray:
     if np.any(near_pi):
         # Near pi the antisymmetric part vanishes: take the axis from the symmetric part.
         Rp = R[near_pi]
-        B = (Rp + np.eye(3)) / 2.0
+        B = ((Rp + np.swapaxes(Rp, -1, -2)) / 2.0 + np.eye(3)) / 2.0  # symmetric part ~ a a^T
         diag = np.clip(np.diagonal(B, axis1=-2, axis2=-1), 0.0, None)
         axis = np.sqrt(diag)
         k = np.argmax(diag, axis=-1)
