@@ -1,0 +1,1 @@
+"""Evaluation: trajectory metrics (evo's ATE/RPE definitions) and the metrics report of `dynaslam2 eval`."""
