@@ -64,6 +64,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_eval(args: argparse.Namespace) -> int:
+    from dynaslam2.eval.report import evaluate, format_table, write_metrics
+    from dynaslam2.io.results import METRICS_FILE
+
+    metrics = evaluate(args.seq, args.res)
+    out = Path(args.json) if args.json else Path(args.res) / METRICS_FILE
+    write_metrics(out, metrics)
+    print(format_table(metrics))
+    if not args.quiet:
+        print(f"wrote {out}")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.target == "sim":
         from sim.bench import bench_sim
@@ -100,6 +113,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("eval", help="score a run's results against the sequence's ground truth",
+                       description="Compare RES (written by `dynaslam2 run`) with the ground truth of SEQ: "
+                                   "ATE after SE(3) Umeyama alignment, RPE per frame pair (m, deg), lost "
+                                   "frames, median stage timings and fps. Prints a table and writes "
+                                   "RES/metrics.json.")
+    p.add_argument("seq", metavar="SEQ", help="sequence folder with ground-truth poses.txt")
+    p.add_argument("res", metavar="RES", help="results folder of `dynaslam2 run`")
+    p.add_argument("--json", default=None, metavar="FILE", help="write the metrics here instead of RES/metrics.json")
+    p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("bench", help="performance benchmarks",
                        description="Measure throughput; figures are medians over the frames.")
