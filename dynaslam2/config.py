@@ -59,6 +59,98 @@ class MatcherConfig:
 
 
 @dataclass
+class TrackingConfig:
+    """Camera tracking, keyframe decision, loss and relocalization (ORB-SLAM2's Tracking)."""
+
+    # Map initialization from the first stereo/RGB-D frame.
+    init_min_points: int = 500
+    # Close/far threshold in baselines (ORB-SLAM2's ThDepth); close points create map points.
+    th_depth_baselines: float = 40.0
+    # RGB-D: depth from the depth image even when a right image exists.
+    use_depth_image: bool = False
+    # masked/dynamic modes: dilation of dynamic-class instance masks, in pixels.
+    mask_dilation_px: int = 5
+    # Motion-model search radius (px at level 0, scaled by the keypoint level) and minimum matches.
+    motion_radius: float = 7.0
+    motion_min_matches: int = 20
+    # Reference-keyframe fallback: minimum descriptor matches; projection window around the prediction.
+    ref_min_matches: int = 15
+    ref_window_px: float = 80.0
+    ref_nn_ratio: float = 0.7
+    # Pose-only tracking succeeds with this many inlier map matches (motion model / reference KF).
+    min_pose_inliers: int = 10
+    # Local map: keyframes (covisible with the frame's points) and projection search radius factor.
+    local_max_keyframes: int = 80
+    local_neighbours: int = 10
+    local_radius: float = 1.0
+    local_radius_relocalized: float = 5.0
+    view_cos_limit: float = 0.5
+    # Tracking is good with at least this many inliers after local-map tracking (50 after relocalization).
+    min_inliers: int = 30
+    min_inliers_relocalized: int = 50
+    # Keyframe insertion (ORB-SLAM2's NeedNewKeyFrame; max_frames defaults to the frame rate).
+    min_frames: int = 0
+    max_frames: int = 10
+    close_tracked_max: int = 100
+    close_untracked_min: int = 70
+    ref_ratio: float = 0.75
+    ref_ratio_stereo_force: float = 0.25
+    keyframe_min_inliers: int = 15
+    new_points_min: int = 100
+    # Relocalization: candidate keyframes, matches, PnP RANSAC, final inliers.
+    reloc_candidates: int = 10
+    reloc_min_matches: int = 15
+    reloc_nn_ratio: float = 0.75
+    reloc_ransac_iterations: int = 300
+    reloc_ransac_px: float = 4.0
+    reloc_min_pnp_inliers: int = 10
+    # Frames of failed relocalization before a new map segment starts from the motion prior.
+    lost_frames_before_new_segment: int = 5
+
+    def validate(self) -> None:
+        for name in ("init_min_points", "motion_min_matches", "min_inliers", "max_frames", "reloc_candidates"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(f"tracking.{name}: expected a positive integer, got {getattr(self, name)}")
+        if self.mask_dilation_px < 0:
+            raise ConfigError(f"tracking.mask_dilation_px: expected >= 0, got {self.mask_dilation_px}")
+        if self.min_frames > self.max_frames:
+            raise ConfigError(f"tracking.min_frames ({self.min_frames}) must not exceed tracking.max_frames "
+                              f"({self.max_frames})")
+
+
+@dataclass
+class MappingConfig:
+    """Local mapping: new points, fusion, culling, local BA window (ORB-SLAM2's LocalMapping)."""
+
+    covisibility_min_weight: int = 15
+    triangulation_neighbours: int = 10
+    triangulation_max_desc_dist: int = 50
+    triangulation_nn_ratio: float = 0.6
+    triangulation_min_parallax_cos: float = 0.9998
+    fuse_neighbours: int = 10
+    fuse_second_neighbours: int = 5
+    fuse_radius: float = 3.0
+    # Map-point culling: found/visible ratio and minimum observers after a few keyframes.
+    cull_found_ratio: float = 0.25
+    cull_min_observers: int = 3
+    cull_after_keyframes: int = 2
+    # Keyframe culling: redundant if this fraction of its close points is seen by >= N other keyframes.
+    kf_cull_redundancy: float = 0.9
+    kf_cull_observers: int = 3
+    # Local BA: window of covisible keyframes around the new one.
+    ba_max_keyframes: int = 20
+    ba_min_covisibility: int = 0
+
+    def validate(self) -> None:
+        if self.covisibility_min_weight < 1:
+            raise ConfigError(f"mapping.covisibility_min_weight: expected >= 1, got {self.covisibility_min_weight}")
+        if not 0.0 <= self.cull_found_ratio <= 1.0:
+            raise ConfigError(f"mapping.cull_found_ratio: expected in [0, 1], got {self.cull_found_ratio}")
+        if self.ba_max_keyframes < 1:
+            raise ConfigError(f"mapping.ba_max_keyframes: expected >= 1, got {self.ba_max_keyframes}")
+
+
+@dataclass
 class SlamConfig:
     """Root of the SLAM configuration."""
 
@@ -66,6 +158,8 @@ class SlamConfig:
     orb: ORBConfig = field(default_factory=ORBConfig)
     stereo: StereoConfig = field(default_factory=StereoConfig)
     matcher: MatcherConfig = field(default_factory=MatcherConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    mapping: MappingConfig = field(default_factory=MappingConfig)
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> SlamConfig:
