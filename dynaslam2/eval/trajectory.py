@@ -37,7 +37,14 @@ def umeyama_alignment(X: np.ndarray, Y: np.ndarray, with_scale: bool = False) ->
 
 
 def rotation_angle_rad(R: np.ndarray) -> np.ndarray:
-    """Angle of (..., 3, 3) rotations, accurate near 0 and pi (atan2 of the antisymmetric and trace parts)."""
+    """Angle of (..., 3, 3) rotations, accurate near 0 and pi (atan2 of the antisymmetric and trace parts).
+
+    Matrices are first projected onto the nearest rotation (polar decomposition), as scipy's
+    `Rotation.from_matrix` (used by evo) does: rotations read from text files are orthonormal
+    only to ~1e-7, which would otherwise shift the angle by ~1e-8 rad.
+    """
+    U, _, Vt = np.linalg.svd(R)
+    R = U @ Vt
     v = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
     sin = 0.5 * np.linalg.norm(v, axis=-1)
     cos = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
