@@ -332,3 +332,6 @@ def test_cli_eval_bad_input_is_one_line_and_exit_2(seq_and_run, tmp_path, capsys
     write_run(tmp_path / "res2", T_est)
     assert "poses.txt" in run_cli_error(["eval", str(tmp_path / "no_gt"), str(tmp_path / "res2")], capsys)
     assert not (tmp_path / "res2" / "metrics.json").exists()
+    bad_json = tmp_path / "missing_dir" / "m.json"
+    assert "cannot write metrics file" in run_cli_error(["eval", str(seq), str(tmp_path / "res2"), "--json",
+                                                         str(bad_json)], capsys)

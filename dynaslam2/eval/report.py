@@ -74,4 +74,7 @@ def format_table(metrics: dict) -> str:
 
 def write_metrics(path: str | os.PathLike, metrics: dict) -> None:
     """Write the metrics as indented JSON, atomically."""
-    write_text_atomic(Path(path), json.dumps(metrics, indent=2) + "\n")
+    try:
+        write_text_atomic(Path(path), json.dumps(metrics, indent=2) + "\n")
+    except OSError as exc:
+        raise InputError(f"cannot write metrics file {path}: {exc.strerror or exc}") from None

@@ -39,7 +39,7 @@ def prepare_results_dir(out_dir: str | os.PathLike, overwrite: bool) -> Path:
         raise InputError(f"results folder {out} is a file; expected a folder (or a path to create)")
     if out.is_dir() and any(out.iterdir()):
         if not overwrite:
-            raise InputError(f"results folder {out} is not empty; use --overwrite to replace its results, "
+            raise InputError(f"results folder {out} is not empty; pass --overwrite to replace its results, "
                              "or choose another folder")
         for name in RESULT_FILES:
             (out / name).unlink(missing_ok=True)
