@@ -43,10 +43,22 @@ class StereoConfig:
     """Stereo matching (ORB-SLAM2's Frame::ComputeStereoMatches)."""
 
     th_high: int = 100
-    sad_window: int = 5
-    sad_search: int = 5
-    outlier_sad_factor: float = 1.5 * 1.4
+    th_low: int = 50  # a left-right match needs descriptor distance < (th_high + th_low) / 2
+    row_band_scale: float = 2.0  # right keypoints are candidates within +-row_band_scale * scale(level) rows
+    sad_window: int = 5  # SAD patch half-size: 11x11
+    sad_search: int = 5  # SAD search +-5 px around the descriptor match, at the keypoint's level
+    sad_centre: Literal["mean", "pixel"] = "mean"  # subtract each patch's mean (or centre pixel, ORB-SLAM2)
+    max_subpixel_delta: float = 1.0  # parabola vertex further than this from the best SAD offset: rejected
+    outlier_sad_factor: float = 1.5 * 1.4  # reject matches with SAD > factor * median SAD
     th_depth_baselines: float = 40.0
+
+    def validate(self) -> None:
+        if not 0 < self.th_low <= self.th_high <= 256:
+            raise ConfigError(f"stereo: expected 0 < th_low <= th_high <= 256, got {self.th_low}, {self.th_high}")
+        if self.sad_window < 1 or self.sad_search < 1:
+            raise ConfigError(f"stereo: sad_window and sad_search must be >= 1, got {self.sad_window}, {self.sad_search}")
+        if not self.row_band_scale > 0 or not self.outlier_sad_factor > 0:
+            raise ConfigError("stereo: row_band_scale and outlier_sad_factor must be positive")
 
 
 @dataclass
@@ -64,8 +76,6 @@ class TrackingConfig:
 
     # Map initialization from the first stereo/RGB-D frame.
     init_min_points: int = 500
-    # Close/far threshold in baselines (ORB-SLAM2's ThDepth); close points create map points.
-    th_depth_baselines: float = 40.0
     # RGB-D: depth from the depth image even when a right image exists.
     use_depth_image: bool = False
     # masked/dynamic modes: dilation of dynamic-class instance masks, in pixels.
@@ -84,6 +94,7 @@ class TrackingConfig:
     local_neighbours: int = 10
     local_radius: float = 1.0
     local_radius_relocalized: float = 5.0
+    local_nn_ratio: float = 0.8
     view_cos_limit: float = 0.5
     # Tracking is good with at least this many inliers after local-map tracking (50 after relocalization).
     min_inliers: int = 30
@@ -151,6 +162,42 @@ class MappingConfig:
 
 
 @dataclass
+class OptimConfig:
+    """gtsam optimizations: pose-only (ORB-SLAM2's PoseOptimization) and local BA (LocalBundleAdjustment).
+
+    Chi-square thresholds are the 95% quantiles for 2 (mono) and 3 (stereo) dof; the Huber kernels use
+    their square roots as delta, as ORB-SLAM2.
+    """
+
+    chi2_mono: float = 5.991
+    chi2_stereo: float = 7.815
+    pose_rounds: int = 4  # optimize / classify outliers rounds
+    pose_iterations: int = 10  # LM iterations per round
+    pose_robust_rounds: int = 3  # rounds with the Huber kernel; the later ones run without it
+    pose_min_points: int = 3  # fewer correspondences: the pose is returned unchanged, no inlier
+    pose_min_inliers: int = 10  # stop the rounds when fewer inliers remain
+    ba_iterations_robust: int = 5  # LM iterations with Huber before the outlier removal
+    ba_iterations_refine: int = 10  # LM iterations without the outliers and without kernel
+    min_depth: float = 1e-3  # observations of points closer than this (or behind) are outliers
+    relative_error_tol: float = 1e-5  # LM stops early when the relative cost decrease is below this
+    linear_solver: Literal["MULTIFRONTAL_CHOLESKY", "MULTIFRONTAL_QR", "SEQUENTIAL_CHOLESKY"] = "MULTIFRONTAL_CHOLESKY"
+    ordering: Literal["COLAMD", "METIS"] = "COLAMD"
+
+    def validate(self) -> None:
+        if not (self.chi2_mono > 0 and self.chi2_stereo > 0):
+            raise ConfigError(f"optim.chi2_mono/chi2_stereo: expected positive, got {self.chi2_mono}, {self.chi2_stereo}")
+        if self.pose_rounds < 1 or self.pose_iterations < 1:
+            raise ConfigError(f"optim.pose_rounds/pose_iterations: expected >= 1, got {self.pose_rounds}, "
+                              f"{self.pose_iterations}")
+        if self.pose_min_points < 3:
+            raise ConfigError(f"optim.pose_min_points: expected >= 3, got {self.pose_min_points}")
+        if self.ba_iterations_robust < 0 or self.ba_iterations_refine < 0:
+            raise ConfigError("optim.ba_iterations_robust/ba_iterations_refine: expected >= 0")
+        if not self.relative_error_tol >= 0:
+            raise ConfigError(f"optim.relative_error_tol: expected >= 0, got {self.relative_error_tol}")
+
+
+@dataclass
 class SlamConfig:
     """Root of the SLAM configuration."""
 
@@ -160,6 +207,7 @@ class SlamConfig:
     matcher: MatcherConfig = field(default_factory=MatcherConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
+    optim: OptimConfig = field(default_factory=OptimConfig)
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> SlamConfig:

@@ -1,0 +1,16 @@
+"""ORB features, stereo/RGB-D depth for keypoints, descriptor matching (ORB-SLAM2's front end)."""
+
+from dynaslam2.features.matcher import hamming_distance, hamming_pairs, match_descriptors, search_by_projection
+from dynaslam2.features.orb import Keypoints, ORBExtractor
+from dynaslam2.features.stereo import depth_from_image, match_stereo
+
+__all__ = [
+    "Keypoints",
+    "ORBExtractor",
+    "depth_from_image",
+    "hamming_distance",
+    "hamming_pairs",
+    "match_descriptors",
+    "match_stereo",
+    "search_by_projection",
+]

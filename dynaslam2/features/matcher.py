@@ -1,0 +1,198 @@
+"""ORB descriptor matching (ORB-SLAM2's ORBmatcher, ref. [1]): Hamming distances, projection search,
+brute-force matching with the ratio test. All vectorized: candidate pairs are generated with numpy
+(grid buckets + repeat/arange), never by a Python loop over features.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dynaslam2.features.orb import Keypoints
+
+HISTO_LENGTH = 30  # rotation-consistency histogram bins over 360 degrees (ORB-SLAM2)
+
+
+def _as_u64(desc: np.ndarray) -> np.ndarray:
+    """(N,32) uint8 -> (N,4) uint64 view (copy only if not contiguous)."""
+    desc = np.ascontiguousarray(desc, dtype=np.uint8)
+    return desc.view(np.uint64).reshape(len(desc), 4)
+
+
+def hamming_pairs(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
+    """Row-wise Hamming distance of two (K,32) uint8 descriptor arrays -> (K,) int32."""
+    if len(desc_a) == 0:
+        return np.zeros(0, np.int32)
+    x = np.bitwise_xor(_as_u64(desc_a), _as_u64(desc_b))
+    return np.bitwise_count(x).sum(axis=1, dtype=np.int32)
+
+
+def hamming_distance(desc_a: np.ndarray, desc_b: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """All-pairs Hamming distances (N,32) x (M,32) uint8 -> (N,M) int32 (xor + popcount on uint64 words)."""
+    a, b = _as_u64(desc_a), _as_u64(desc_b)
+    out = np.empty((len(a), len(b)), np.int32)
+    for s in range(0, len(a), chunk):  # bounded temporaries: chunk x M x 4 words
+        x = np.bitwise_xor(a[s : s + chunk, None, :], b[None, :, :])
+        out[s : s + chunk] = np.bitwise_count(x).sum(axis=2, dtype=np.int32)
+    return out
+
+
+def rotation_consistent(rot_deg: np.ndarray) -> np.ndarray:
+    """Mask of the rotations in the 3 most populated of HISTO_LENGTH bins (ORB-SLAM2's ComputeThreeMaxima:
+    the 2nd/3rd bins count only when holding > 10% of the 1st)."""
+    if len(rot_deg) == 0:
+        return np.zeros(0, bool)
+    bins = (np.rint(np.mod(rot_deg, 360.0) * HISTO_LENGTH / 360.0).astype(np.int64)) % HISTO_LENGTH
+    counts = np.bincount(bins, minlength=HISTO_LENGTH)
+    top = np.argsort(-counts, kind="stable")[:3]
+    keep_bins = [top[0]] + [b for b in top[1:] if counts[b] > 0.1 * counts[top[0]]]
+    return np.isin(bins, keep_bins)
+
+
+def _pairs_in_radius(uv_kp: np.ndarray, uv_q: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All (query, keypoint) pairs with |du| < r and |dv| < r (ORB-SLAM2's GetFeaturesInArea square),
+    via a grid bucketing of the keypoints."""
+    if len(uv_kp) == 0 or len(uv_q) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    cell = float(np.clip(np.median(radius), 4.0, 64.0))
+    origin = uv_kp.min(axis=0) - 1.0
+    kc = np.floor((uv_kp - origin) / cell).astype(np.int64)
+    n_cx = int(kc[:, 0].max()) + 1
+    n_cy = int(kc[:, 1].max()) + 1
+    key = kc[:, 1] * n_cx + kc[:, 0]
+    kp_order = np.argsort(key, kind="stable")
+    starts = np.searchsorted(key[kp_order], np.arange(n_cx * n_cy + 1))
+    # Cell ranges of each query square, clipped to the grid.
+    lo = np.floor((uv_q - radius[:, None] - origin) / cell).astype(np.int64)
+    hi = np.floor((uv_q + radius[:, None] - origin) / cell).astype(np.int64)
+    lo = np.maximum(lo, 0)
+    hi = np.minimum(hi, [n_cx - 1, n_cy - 1])
+    nx = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
+    ny = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
+    n_cells = nx * ny
+    q_of_cell = np.repeat(np.arange(len(uv_q)), n_cells)
+    if len(q_of_cell) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    local = np.arange(len(q_of_cell)) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
+    cx = lo[q_of_cell, 0] + local % nx[q_of_cell]
+    cy = lo[q_of_cell, 1] + local // nx[q_of_cell]
+    cid = cy * n_cx + cx
+    c_start, c_count = starts[cid], starts[cid + 1] - starts[cid]
+    q = np.repeat(q_of_cell, c_count)
+    offs = np.arange(len(q)) - np.repeat(np.cumsum(c_count) - c_count, c_count)
+    k = kp_order[np.repeat(c_start, c_count) + offs]
+    d = np.abs(uv_kp[k] - uv_q[q])
+    inside = (d[:, 0] < radius[q]) & (d[:, 1] < radius[q])
+    return q[inside], k[inside]
+
+
+def _best_two(q: np.ndarray, dist: np.ndarray, n_q: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per query: position (into q) of the best pair, and of the 2nd best (-1 if none); sort by (q, dist, pos)."""
+    order = np.lexsort((np.arange(len(q)), dist, q))
+    qs = q[order]
+    first = np.flatnonzero(np.r_[True, qs[1:] != qs[:-1]])
+    best = np.full(n_q, -1, np.int64)
+    second = np.full(n_q, -1, np.int64)
+    best[qs[first]] = order[first]
+    has2 = (first + 1 < len(qs)) & (qs[np.minimum(first + 1, len(qs) - 1)] == qs[first])
+    second[qs[first[has2]]] = order[first[has2] + 1]
+    return best, second, order
+
+
+def unique_by_distance(idx: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Keep, for each target index, only the entry of smallest distance (ties: lowest position); -1 elsewhere."""
+    idx = idx.copy()
+    valid = np.flatnonzero(idx >= 0)
+    if len(valid) == 0:
+        return idx
+    order = valid[np.lexsort((valid, dist[valid], idx[valid]))]
+    t = idx[order]
+    dup = np.r_[False, t[1:] == t[:-1]]
+    idx[order[dup]] = -1
+    return idx
+
+
+def search_by_projection(
+    kp: Keypoints,
+    uv_proj: np.ndarray,
+    desc_proj: np.ndarray,
+    radius: np.ndarray,
+    octave_range: np.ndarray | None,
+    u_right_proj: np.ndarray | None,
+    kp_u_right: np.ndarray | None,
+    th_high: int,
+    nn_ratio: float,
+    check_orientation: bool,
+    angle_proj: np.ndarray | None = None,
+    available: np.ndarray | None = None,
+) -> np.ndarray:
+    """ORB-SLAM2's SearchByProjection: match M projected map points to the frame's keypoints.
+
+    Candidates lie in the square |du|,|dv| < radius (per point, in level-0 px), with octave in
+    `octave_range` (M,2) inclusive if given, not excluded by `available` (N,) bool if given, and for
+    keypoints with kp_u_right > 0: |u_right_proj - kp_u_right| < radius (when u_right_proj given,
+    entries < 0 = no stereo prediction). The best descriptor distance must be <= th_high and, when the
+    second best is on the same octave, < nn_ratio * second (nn_ratio=1 disables it). One keypoint keeps
+    only its best map point. With check_orientation, matches outside the 3 main bins of the rotation
+    histogram of (angle_proj - kp.angle) are dropped. Returns (M,) int32 keypoint index or -1.
+    """
+    M = len(uv_proj)
+    result = np.full(M, -1, np.int32)
+    if M == 0 or len(kp) == 0:
+        return result
+    uv_proj = np.asarray(uv_proj, np.float64)
+    radius = np.broadcast_to(np.asarray(radius, np.float64), (M,))
+    q, k = _pairs_in_radius(kp.uv.astype(np.float64), uv_proj, radius)
+    keep = np.ones(len(q), bool)
+    if available is not None:
+        keep &= np.asarray(available, bool)[k]
+    if octave_range is not None:
+        octave_range = np.asarray(octave_range)
+        o = kp.octave[k]
+        keep &= (o >= octave_range[q, 0]) & (o <= octave_range[q, 1])
+    if u_right_proj is not None and kp_u_right is not None:
+        ur_q = np.asarray(u_right_proj, np.float64)[q]
+        ur_k = np.asarray(kp_u_right, np.float64)[k]
+        stereo = (ur_k > 0) & (ur_q >= 0)
+        keep &= ~stereo | (np.abs(ur_q - ur_k) < radius[q])
+    q, k = q[keep], k[keep]
+    if len(q) == 0:
+        return result
+    dist = hamming_pairs(np.asarray(desc_proj)[q], kp.desc[k])
+    best, second, _ = _best_two(q, dist, M)
+    has = best >= 0
+    best_d = np.where(has, dist[np.maximum(best, 0)], 256)
+    ok = has & (best_d <= th_high)
+    has2 = second >= 0
+    second_d = np.where(has2, dist[np.maximum(second, 0)], 256)
+    same_level = has2 & (kp.octave[k[np.maximum(best, 0)]] == kp.octave[k[np.maximum(second, 0)]])
+    ok &= ~(same_level & (best_d > nn_ratio * second_d))
+    match = np.where(ok, k[np.maximum(best, 0)], -1)
+    match = unique_by_distance(match, best_d)
+    if check_orientation and angle_proj is not None:
+        m = np.flatnonzero(match >= 0)
+        rot = np.asarray(angle_proj, np.float64)[m] - kp.angle[match[m]]
+        match[m[~rotation_consistent(rot)]] = -1
+    result[:] = match
+    return result
+
+
+def match_descriptors(desc_a: np.ndarray, desc_b: np.ndarray, th: int, nn_ratio: float, mutual: bool = True) -> np.ndarray:
+    """Brute-force matches (K,2) int32 [i_a, i_b]: best distance <= th, best < nn_ratio * second best,
+    and (if mutual) i_a is also the best of column i_b. Each i_b is used at most once (best kept)."""
+    if len(desc_a) == 0 or len(desc_b) == 0:
+        return np.zeros((0, 2), np.int32)
+    D = hamming_distance(desc_a, desc_b)
+    rows = np.arange(len(D))
+    best = np.argmin(D, axis=1)
+    best_d = D[rows, best]
+    if D.shape[1] > 1:
+        second_d = np.partition(D, 1, axis=1)[:, 1]
+        ok = best_d < nn_ratio * second_d
+    else:
+        ok = np.ones(len(D), bool)
+    ok &= best_d <= th
+    if mutual:
+        ok &= np.argmin(D, axis=0)[best] == rows
+    match = unique_by_distance(np.where(ok, best, -1), best_d)
+    i_a = np.flatnonzero(match >= 0)
+    return np.stack([i_a, match[i_a]], axis=1).astype(np.int32)

@@ -1,0 +1,239 @@
+"""ORB features on an image pyramid, spread over the image (ORB-SLAM2's ORBextractor, ref. [1]).
+
+Per level: FAST is run once at `min_th_fast` with non-maximum suppression; a cell (~`cell_size` px)
+keeps its corners scoring >= `ini_th_fast` and falls back to the weaker ones only where it has none
+(FAST's score does not depend on the detection threshold, so this equals ORB-SLAM2's two-pass per-cell
+detection). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
+the largest square cell for which at least the level's budget of cells is occupied, the best response
+per cell, then the budget's best of those. Orientation is the intensity centroid (IC_Angle) on the
+level image; the rBRIEF descriptor is OpenCV's ORB on the Gaussian-blurred level (same pattern and
+blur as ORB-SLAM2). OpenCV 5.0 keeps the angle of provided keypoints (checked in the tests).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from dynaslam2.config import ORBConfig
+from dynaslam2.errors import InputError
+
+HALF_PATCH = 15  # IC_Angle radius (ORB-SLAM2's HALF_PATCH_SIZE)
+
+
+@dataclass
+class Keypoints:
+    """Keypoints of one image; `uv` in level-0 pixels, `desc` 256-bit rBRIEF."""
+
+    uv: np.ndarray  # (N,2) float32
+    octave: np.ndarray  # (N,) int32
+    angle: np.ndarray  # (N,) float32 degrees in [0, 360)
+    response: np.ndarray  # (N,) float32 FAST score
+    desc: np.ndarray  # (N,32) uint8
+
+    def __len__(self) -> int:
+        return len(self.uv)
+
+    def subset(self, idx) -> "Keypoints":
+        """Keypoints selected by an index array or a boolean mask."""
+        return Keypoints(self.uv[idx], self.octave[idx], self.angle[idx], self.response[idx], self.desc[idx])
+
+    @classmethod
+    def empty(cls) -> "Keypoints":
+        return cls(
+            np.zeros((0, 2), np.float32),
+            np.zeros(0, np.int32),
+            np.zeros(0, np.float32),
+            np.zeros(0, np.float32),
+            np.zeros((0, 32), np.uint8),
+        )
+
+    @classmethod
+    def concatenate(cls, parts: list["Keypoints"]) -> "Keypoints":
+        if not parts:
+            return cls.empty()
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("uv", "octave", "angle", "response", "desc")))
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """uint8 HxW grey, or HxWx3 RGB converted to grey; anything else is an InputError."""
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        raise InputError(f"image: expected uint8 pixels, got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    if image.ndim != 2:
+        raise InputError(f"image: expected HxW grey or HxWx3 RGB, got shape {image.shape}")
+    return np.ascontiguousarray(image)
+
+
+def level_budgets(n_features: int, n_levels: int, scale_factor: float) -> np.ndarray:
+    """Features per level: ORB-SLAM2's geometric series with ratio 1/scale_factor, summing to n_features."""
+    factor = 1.0 / scale_factor
+    first = n_features * (1 - factor) / (1 - factor**n_levels)
+    budgets = np.rint(first * factor ** np.arange(n_levels)).astype(np.int64)
+    budgets[-1] = max(n_features - int(budgets[:-1].sum()), 0)
+    return budgets
+
+
+def _ic_kernels() -> tuple[np.ndarray, np.ndarray]:
+    """Weights u*[inside] and v*[inside] over the circular patch of radius HALF_PATCH (ORB-SLAM2's umax)."""
+    vmax = int(np.floor(HALF_PATCH * np.sqrt(2.0) / 2 + 1))
+    vmin = int(np.ceil(HALF_PATCH * np.sqrt(2.0) / 2))
+    umax = np.zeros(HALF_PATCH + 1, np.int64)
+    for v in range(vmax + 1):
+        umax[v] = int(np.rint(np.sqrt(HALF_PATCH**2 - v * v)))
+    v0 = 0
+    for v in range(HALF_PATCH, vmin - 1, -1):  # make the circle symmetric, as ORB-SLAM2 does
+        while umax[v0] == umax[v0 + 1]:
+            v0 += 1
+        umax[v] = v0
+        v0 += 1
+    r = np.arange(-HALF_PATCH, HALF_PATCH + 1)
+    inside = np.abs(r)[None, :] <= umax[np.abs(r)][:, None]
+    w_u = (r[None, :] * inside).astype(np.float32)
+    w_v = (r[:, None] * inside).astype(np.float32)
+    return w_u.ravel(), w_v.ravel()
+
+
+def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, extent: float) -> np.ndarray:
+    """Indices of <= n_keep points spread over the image: best response per cell of the largest square
+    grid with >= n_keep occupied cells, then the n_keep best of those (ties by index: deterministic)."""
+    n = len(xy)
+    if n <= n_keep:
+        return np.arange(n)
+    order = np.lexsort((np.arange(n), -response))  # best first
+    xy_sorted = xy[order]
+
+    def winners(cell: float) -> np.ndarray:
+        ij = np.floor(xy_sorted / cell).astype(np.int64)
+        key = ij[:, 1] * (int(extent / cell) + 2) + ij[:, 0]
+        _, first = np.unique(key, return_index=True)
+        return first
+
+    lo, hi = 1.0, float(extent)
+    best = winners(lo)
+    if len(best) >= n_keep:
+        while hi - lo > 0.5:
+            mid = 0.5 * (lo + hi)
+            w = winners(mid)
+            if len(w) >= n_keep:
+                lo, best = mid, w
+            else:
+                hi = mid
+    best = np.sort(best)[:n_keep]  # sorted positions = descending response
+    return order[best]
+
+
+class ORBExtractor:
+    """ORB-SLAM2's ORBextractor: pyramid, distributed FAST, orientation and rBRIEF (see module doc)."""
+
+    def __init__(self, cfg: ORBConfig):
+        self.cfg = cfg
+        self.n_levels = cfg.n_levels
+        self.scale_factors = (cfg.scale_factor ** np.arange(cfg.n_levels)).astype(np.float64)
+        self.inv_scale_factors = 1.0 / self.scale_factors
+        self.level_sigma2 = self.scale_factors**2
+        self.inv_level_sigma2 = 1.0 / self.level_sigma2
+        self.level_budgets = level_budgets(cfg.n_features, cfg.n_levels, cfg.scale_factor)
+        self._w_u, self._w_v = _ic_kernels()
+        self._fast = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
+        self._orb = cv2.ORB_create(
+            nfeatures=1, nlevels=1, edgeThreshold=cfg.edge_threshold, patchSize=cfg.patch_size, fastThreshold=cfg.min_th_fast
+        )
+
+    def build_pyramid(self, gray: np.ndarray) -> list[np.ndarray]:
+        """Level l = level l-1 resized by 1/scale_factor (bilinear), as ORB-SLAM2. RGB input is converted."""
+        gray = to_gray(gray)
+        pyramid = [gray]
+        h, w = gray.shape
+        for level in range(1, self.n_levels):
+            size = (int(np.rint(w * self.inv_scale_factors[level])), int(np.rint(h * self.inv_scale_factors[level])))
+            if min(size) < 2 * self.cfg.edge_threshold + 1:
+                pyramid.append(np.zeros((max(size[1], 1), max(size[0], 1)), np.uint8))  # too small: no features
+                continue
+            pyramid.append(cv2.resize(pyramid[-1], size, interpolation=cv2.INTER_LINEAR))
+        return pyramid
+
+    def extract(self, pyramid: list[np.ndarray], mask: np.ndarray | None = None) -> Keypoints:
+        """Distributed ORB keypoints of all levels. `mask` (HxW bool/uint8 at level 0, True/non-zero = usable)
+        removes candidates before the distribution, so the budget goes to the usable area."""
+        if len(pyramid) != self.n_levels:
+            raise InputError(f"pyramid: expected {self.n_levels} levels, got {len(pyramid)}")
+        if mask is not None:
+            mask = np.asarray(mask)
+            if mask.shape != pyramid[0].shape:
+                raise InputError(f"mask: expected shape {pyramid[0].shape}, got {mask.shape}")
+            mask = mask.astype(bool, copy=False)
+        parts = [self._extract_level(level, pyramid[level], mask) for level in range(self.n_levels)]
+        return Keypoints.concatenate([p for p in parts if p is not None])
+
+    def _detect(self, level: int, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """FAST candidates (integer xy at this level, response) after the per-cell threshold rule and the mask."""
+        cfg = self.cfg
+        edge = cfg.edge_threshold
+        h, w = img.shape
+        if w <= 2 * edge or h <= 2 * edge:
+            return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+        kps = self._fast.detect(img)
+        if not kps:
+            return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+        xy = cv2.KeyPoint.convert(kps)
+        resp = np.fromiter((k.response for k in kps), np.float32, len(kps))
+        inside = (xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)
+        xy, resp = xy[inside], resp[inside]
+        n_cx = max(1, (w - 2 * edge) // cfg.cell_size)
+        n_cy = max(1, (h - 2 * edge) // cfg.cell_size)
+        cw = int(np.ceil((w - 2 * edge) / n_cx))
+        ch = int(np.ceil((h - 2 * edge) / n_cy))
+        cell = ((xy[:, 1].astype(np.int64) - edge) // ch) * n_cx + (xy[:, 0].astype(np.int64) - edge) // cw
+        strong = resp >= cfg.ini_th_fast
+        has_strong = np.bincount(cell[strong], minlength=n_cx * n_cy) > 0
+        keep = strong | ~has_strong[cell]
+        if mask is not None:
+            s = self.scale_factors[level]
+            H0, W0 = mask.shape
+            col = np.clip(np.rint(xy[:, 0] * s).astype(np.int64), 0, W0 - 1)
+            row = np.clip(np.rint(xy[:, 1] * s).astype(np.int64), 0, H0 - 1)
+            keep &= mask[row, col]
+        return xy[keep], resp[keep]
+
+    def _angles(self, img: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """Intensity-centroid orientation in degrees [0, 360) (ORB-SLAM2's IC_Angle)."""
+        windows = sliding_window_view(img, (2 * HALF_PATCH + 1, 2 * HALF_PATCH + 1))
+        ix = xy[:, 0].astype(np.int64) - HALF_PATCH
+        iy = xy[:, 1].astype(np.int64) - HALF_PATCH
+        patches = windows[iy, ix].reshape(len(xy), -1).astype(np.float32)
+        m_10 = patches @ self._w_u
+        m_01 = patches @ self._w_v
+        return (np.degrees(np.arctan2(m_01, m_10)) % 360.0).astype(np.float32)
+
+    def _describe(self, level: int, img: np.ndarray, xy: np.ndarray, angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """rBRIEF descriptors on the blurred level (OpenCV's ORB); returns (kept indices, descriptors)."""
+        size = float(self.cfg.patch_size)
+        kps = [cv2.KeyPoint(float(x), float(y), size, float(a), 0.0, 0, i) for i, ((x, y), a) in enumerate(zip(xy, angle))]
+        kps_out, desc = self._orb.compute(img, kps)
+        if desc is None or not kps_out:
+            return np.zeros(0, np.int64), np.zeros((0, 32), np.uint8)
+        idx = np.fromiter((k.class_id for k in kps_out), np.int64, len(kps_out))
+        return idx, desc
+
+    def _extract_level(self, level: int, img: np.ndarray, mask: np.ndarray | None) -> Keypoints | None:
+        budget = int(self.level_budgets[level])
+        if budget <= 0:
+            return None
+        xy, resp = self._detect(level, img, mask)
+        if len(xy) == 0:
+            return None
+        keep = spread_best(xy, resp, budget, float(max(img.shape)))
+        keep.sort()
+        xy, resp = xy[keep], resp[keep]
+        angle = self._angles(img, xy)
+        idx, desc = self._describe(level, img, xy, angle)
+        order = np.argsort(idx, kind="stable")
+        idx, desc = idx[order], desc[order]
+        uv = (xy[idx] * self.scale_factors[level]).astype(np.float32)
+        return Keypoints(uv, np.full(len(idx), level, np.int32), angle[idx], resp[idx], np.ascontiguousarray(desc))

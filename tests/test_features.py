@@ -1,0 +1,256 @@
+"""ORB extraction, stereo matching and descriptor matching (dynaslam2.features)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dynaslam2.config import ORBConfig, StereoConfig
+from dynaslam2.errors import InputError
+from dynaslam2.features import (
+    Keypoints,
+    ORBExtractor,
+    depth_from_image,
+    hamming_distance,
+    hamming_pairs,
+    match_descriptors,
+    match_stereo,
+    search_by_projection,
+)
+from dynaslam2.geometry.camera import StereoCamera
+
+KITTI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kitti-odometry-06"
+
+
+def _kitti(name: str) -> np.ndarray:
+    path = KITTI / name / "000000.png"
+    if not path.exists():
+        pytest.skip(f"real KITTI odometry 06 data absent: {path}")
+    return cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+
+
+def _kitti_camera(shape) -> StereoCamera:
+    rows = {}
+    for line in (KITTI / "calib.txt").read_text().splitlines():
+        key, _, vals = line.partition(":")
+        rows[key.strip()] = np.array(vals.split(), float)
+    return StereoCamera.from_projection_matrices(rows["P0"], rows["P1"], shape[1], shape[0])
+
+
+@pytest.fixture(scope="module")
+def extractor() -> ORBExtractor:
+    return ORBExtractor(ORBConfig())
+
+
+@pytest.fixture(scope="module")
+def kitti_left(extractor):
+    img = _kitti("image_0")
+    pyr = extractor.build_pyramid(img)
+    return img, pyr, extractor.extract(pyr)
+
+
+def _occupied_fraction(uv: np.ndarray, shape, n: int, skip_top_rows: int = 0) -> float:
+    """Fraction of an n x n grid's cells (minus the top rows) holding at least one keypoint."""
+    h, w = shape
+    cx = np.minimum((uv[:, 0] * n / w).astype(int), n - 1)
+    cy = np.minimum((uv[:, 1] * n / h).astype(int), n - 1)
+    occ = np.zeros((n, n), bool)
+    occ[cy, cx] = True
+    return occ[skip_top_rows:].mean()
+
+
+def test_extraction_count_levels_and_types(kitti_left, extractor):
+    img, pyr, kp = kitti_left
+    n = extractor.cfg.n_features
+    assert 0.95 * n <= len(kp) <= n
+    assert set(np.unique(kp.octave)) == set(range(extractor.cfg.n_levels))
+    counts = np.bincount(kp.octave, minlength=extractor.cfg.n_levels)
+    assert np.all(np.diff(counts) < 0), counts  # geometric series: fewer features at coarser levels
+    assert kp.uv.dtype == np.float32 and kp.uv.shape == (len(kp), 2)
+    assert kp.desc.dtype == np.uint8 and kp.desc.shape == (len(kp), 32)
+    assert kp.octave.dtype == np.int32 and kp.angle.dtype == np.float32 and kp.response.dtype == np.float32
+    assert np.all((kp.angle >= 0) & (kp.angle < 360))
+    assert np.all(kp.response >= extractor.cfg.min_th_fast)
+    edge = extractor.cfg.edge_threshold
+    assert kp.uv[:, 0].min() >= edge and kp.uv[:, 0].max() <= img.shape[1] - edge
+    assert len(kp.subset(kp.octave == 0)) == counts[0]
+
+
+def test_extraction_spreads_over_image_unlike_plain_orb(kitti_left):
+    img, _, kp = kitti_left
+    assert _occupied_fraction(kp.uv, img.shape, 4) == 1.0
+    plain = cv2.ORB_create(nfeatures=len(kp)).detect(img)
+    plain_uv = cv2.KeyPoint.convert(plain)
+    ours_fine = _occupied_fraction(kp.uv, img.shape, 16, skip_top_rows=2)
+    plain_fine = _occupied_fraction(plain_uv, img.shape, 16, skip_top_rows=2)
+    assert ours_fine >= 0.9
+    assert ours_fine > plain_fine + 0.1, (ours_fine, plain_fine)
+
+
+def test_extraction_deterministic(kitti_left, extractor):
+    img, _, kp = kitti_left
+    kp2 = extractor.extract(extractor.build_pyramid(img.copy()))
+    for name in ("uv", "octave", "angle", "response", "desc"):
+        np.testing.assert_array_equal(getattr(kp, name), getattr(kp2, name))
+
+
+def test_extraction_mask_drops_and_reallocates(kitti_left, extractor):
+    img, pyr, kp = kitti_left
+    mask = np.ones(img.shape, bool)
+    mask[:, : img.shape[1] // 2] = False
+    kp_m = extractor.extract(pyr, mask)
+    assert kp_m.uv[:, 0].min() >= img.shape[1] // 2 - 1
+    assert len(kp_m) > 0.9 * len(kp)  # the budget moves to the usable half
+    with pytest.raises(InputError):
+        extractor.extract(pyr, mask[:10])
+
+
+def test_orientation_makes_descriptors_rotation_invariant(kitti_left, extractor):
+    """Features of the image rotated by 90 degrees match the original at the rotated positions
+    (needs the intensity-centroid angle and OpenCV keeping provided angles)."""
+    img, _, kp = kitti_left
+    rot = cv2.rotate(img, cv2.ROTATE_90_CLOCKWISE)  # (x, y) -> (h-1-y, x)
+    kp_r = extractor.extract(extractor.build_pyramid(rot))
+    matches = match_descriptors(kp.desc, kp_r.desc, th=50, nn_ratio=0.8)
+    expected = np.stack([img.shape[0] - 1 - kp.uv[:, 1], kp.uv[:, 0]], axis=1)
+    err = np.linalg.norm(expected[matches[:, 0]] - kp_r.uv[matches[:, 1]], axis=1)
+    good = err < 3.0 * ORBExtractor(ORBConfig()).scale_factors[kp.octave[matches[:, 0]]]
+    assert good.sum() > 200 and good.mean() > 0.9, (len(matches), good.mean())
+
+
+def test_rgb_input_and_bad_input(extractor):
+    rgb = np.random.default_rng(0).integers(0, 255, (120, 160, 3), dtype=np.uint8)
+    pyr = extractor.build_pyramid(rgb)
+    assert pyr[0].shape == (120, 160)
+    with pytest.raises(InputError):
+        extractor.build_pyramid(np.zeros((10, 10), np.float32))
+
+
+def test_stereo_kitti_against_dense_reference(kitti_left, extractor):
+    img_l, pyr_l, kp_l = kitti_left
+    img_r = _kitti("image_1")
+    camera = _kitti_camera(img_l.shape)
+    pyr_r = extractor.build_pyramid(img_r)
+    kp_r = extractor.extract(pyr_r)
+    u_right, depth = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, StereoConfig())
+    has = depth > 0
+    assert has.mean() >= 0.4, has.mean()
+    assert np.all(u_right[~has] == -1)
+    np.testing.assert_allclose(camera.bf / depth[has], kp_l.uv[has, 0] - u_right[has], atol=1e-3)  # float32 u
+    sgbm = cv2.StereoSGBM_create(0, 128, 5, P1=8 * 25, P2=32 * 25, uniquenessRatio=10, mode=cv2.STEREO_SGBM_MODE_HH)
+    ref = sgbm.compute(img_l, img_r).astype(np.float32) / 16.0
+    u, v = np.rint(kp_l.uv[has]).astype(int).T
+    ref_d = ref[v, u]
+    valid = ref_d > 0
+    err = np.abs(kp_l.uv[has, 0] - u_right[has] - ref_d)[valid]
+    assert valid.sum() > 300
+    assert np.median(err) < 0.5, np.median(err)
+
+
+def _shifted_pair(disparity: float, shape=(240, 320), seed: int = 0):
+    """Smooth random texture (left) and the same texture shifted left by `disparity` px (right)."""
+    rng = np.random.default_rng(seed)
+    noise = rng.normal(0, 1, (shape[0], shape[1] + 64)).astype(np.float32)
+    tex = cv2.GaussianBlur(noise, (0, 0), 1.5)
+    tex = cv2.normalize(tex, None, 0, 255, cv2.NORM_MINMAX)
+    M = np.float32([[1, 0, -disparity], [0, 1, 0]])  # right(x) = left(x + d)
+    right = cv2.warpAffine(tex, M, (tex.shape[1], tex.shape[0]), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+    left, right = tex[:, 32:-32], right[:, 32:-32]
+    return np.clip(np.rint(left), 0, 255).astype(np.uint8), np.clip(np.rint(right), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("disparity", [7.25, 12.5, 20.8])
+def test_stereo_subpixel_on_shifted_texture(extractor, disparity):
+    left, right = _shifted_pair(disparity)
+    camera = StereoCamera(300.0, 300.0, 160.0, 120.0, 0.1, 320, 240)
+    ex = ORBExtractor(ORBConfig(n_features=500))
+    pyr_l, pyr_r = ex.build_pyramid(left), ex.build_pyramid(right)
+    kp_l, kp_r = ex.extract(pyr_l), ex.extract(pyr_r)
+    u_right, depth = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, ex.scale_factors, StereoConfig())
+    has = depth > 0
+    assert has.sum() > 100
+    err = np.abs(kp_l.uv[has, 0] - u_right[has] - disparity)
+    assert np.median(err) < 0.15, np.median(err)
+    assert np.mean(err < 1.0) > 0.95
+
+
+def test_stereo_rejects_mismatched_sizes(extractor):
+    a = extractor.build_pyramid(np.zeros((100, 120), np.uint8))
+    b = extractor.build_pyramid(np.zeros((100, 130), np.uint8))
+    camera = StereoCamera(100.0, 100.0, 60.0, 50.0, 0.1, 120, 100)
+    kp = Keypoints.empty()
+    with pytest.raises(InputError):
+        match_stereo(kp, kp, a, b, camera, extractor.scale_factors, StereoConfig())
+
+
+def test_depth_from_image():
+    camera = StereoCamera(500.0, 500.0, 50.0, 40.0, 0.08, 100, 80)
+    depth = np.zeros((80, 100), np.float32)
+    depth[10, 20] = 2.0
+    depth[30, 40] = np.nan
+    kp = Keypoints.empty()
+    kp.uv = np.array([[20.2, 9.8], [40, 30], [60, 60]], np.float32)
+    u_right, z = depth_from_image(kp, depth, camera)
+    np.testing.assert_allclose(z, [2.0, -1, -1])
+    np.testing.assert_allclose(u_right, [20.2 - 40.0 / 2.0, -1, -1], rtol=1e-5)
+
+
+def test_hamming_equals_naive_reference():
+    rng = np.random.default_rng(1)
+    a = rng.integers(0, 256, (37, 32), dtype=np.uint8)
+    b = rng.integers(0, 256, (300, 32), dtype=np.uint8)
+    naive = np.unpackbits(a[:, None, :] ^ b[None, :, :], axis=2).sum(axis=2)
+    np.testing.assert_array_equal(hamming_distance(a, b), naive)
+    assert hamming_distance(a, b).dtype == np.int32
+    np.testing.assert_array_equal(hamming_pairs(a, b[:37]), naive[np.arange(37), np.arange(37)])
+    assert hamming_distance(a[:0], b).shape == (0, 300)
+
+
+def test_match_descriptors_recovers_permutation():
+    rng = np.random.default_rng(2)
+    a = rng.integers(0, 256, (200, 32), dtype=np.uint8)
+    perm = rng.permutation(200)
+    b = a[perm].copy()
+    flips = rng.integers(0, 32, (200, 3))  # a few flipped bits
+    b[np.arange(200)[:, None], flips] ^= 1
+    m = match_descriptors(a, b, th=50, nn_ratio=0.8)
+    assert len(m) == 200
+    np.testing.assert_array_equal(perm[m[:, 1]], m[:, 0])
+
+
+def test_search_by_projection_recovers_shift(kitti_left, extractor):
+    """Keypoints of a shifted copy of the image are found from the original ones projected with the shift."""
+    img, _, kp = kitti_left
+    shift = np.array([6.0, -4.0])
+    M = np.float32([[1, 0, shift[0]], [0, 1, shift[1]]])
+    moved = cv2.warpAffine(img, M, (img.shape[1], img.shape[0]), borderMode=cv2.BORDER_REFLECT)
+    kp2 = extractor.extract(extractor.build_pyramid(moved))
+    uv_proj = kp.uv + shift + 0.7  # a small prediction error
+    radius = 4.0 * extractor.scale_factors[kp.octave]
+    octave_range = np.stack([kp.octave - 1, kp.octave + 1], axis=1)
+    idx = search_by_projection(kp2, uv_proj, kp.desc, radius, octave_range, None, None, 100, 0.9, True, kp.angle)
+    found = idx >= 0
+    # Keypoints re-detected at the shifted position (same octave) are the true correspondences.
+    dist = np.linalg.norm((kp.uv + shift)[:, None, :] - kp2.uv[None, :, :], axis=2)
+    nearest = dist.argmin(axis=1)
+    exists = (dist.min(axis=1) < 1.0) & (kp2.octave[nearest] == kp.octave)
+    assert exists.sum() > 300
+    assert (found & exists).sum() > 0.9 * exists.sum(), (found & exists).sum() / exists.sum()
+    assert np.mean(idx[found & exists] == nearest[found & exists]) > 0.97
+    err = np.abs(kp2.uv[idx[found]] - uv_proj[found])
+    assert np.all(err < radius[found, None])
+    assert len(np.unique(idx[found])) == found.sum()  # one keypoint per map point
+    # The stereo check removes candidates with an inconsistent right coordinate.
+    u_r_kp = kp2.uv[:, 0] - 10.0
+    idx_bad = search_by_projection(
+        kp2, uv_proj, kp.desc, radius, octave_range, uv_proj[:, 0] - 10.0 + 50.0, u_r_kp, 100, 0.9, False
+    )
+    assert np.all(idx_bad == -1)
+    # Unavailable keypoints are never returned.
+    available = np.ones(len(kp2), bool)
+    available[idx[found]] = False
+    idx_av = search_by_projection(kp2, uv_proj, kp.desc, radius, octave_range, None, None, 100, 0.9, False, available=available)
+    assert not np.any(np.isin(idx_av[idx_av >= 0], idx[found]))
