@@ -1,0 +1,141 @@
+"""numpy <-> gtsam conversions, noise models and vectorized factor builders (the only gtsam glue).
+
+gtsam's `Pose3` variables hold the camera pose in the world, `T_w_c` (body pose); our API speaks
+`T_c_w`. Stereo observations are `[u, v, u_right]` with `u_right < 0` meaning monocular.
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+from dynaslam2.config import OptimConfig
+from dynaslam2.geometry.camera import StereoCamera
+
+
+def pose3_from_matrix(T: np.ndarray) -> gtsam.Pose3:
+    """(4, 4) rigid transform -> gtsam.Pose3 (same transform)."""
+    return gtsam.Pose3(np.asarray(T, dtype=float))
+
+
+def matrix_from_pose3(pose3: gtsam.Pose3) -> np.ndarray:
+    """gtsam.Pose3 -> (4, 4) rigid transform."""
+    return np.asarray(pose3.matrix(), dtype=float)
+
+
+def stereo_calibration(camera: StereoCamera) -> gtsam.Cal3_S2Stereo:
+    """gtsam stereo calibration (fx, fy, skew 0, cx, cy, baseline)."""
+    return gtsam.Cal3_S2Stereo(camera.fx, camera.fy, 0.0, camera.cx, camera.cy, camera.baseline)
+
+
+def mono_calibration(camera: StereoCamera) -> gtsam.Cal3_S2:
+    """gtsam pinhole calibration of the left camera."""
+    return gtsam.Cal3_S2(camera.fx, camera.fy, 0.0, camera.cx, camera.cy)
+
+
+def huber_stereo_noise(inv_sigma2: float, delta: float | None) -> gtsam.noiseModel.Base:
+    """Isotropic 3-dof noise, sigma = 1/sqrt(inv_sigma2), wrapped in a Huber kernel (None: no kernel)."""
+    return _robust(gtsam.noiseModel.Isotropic.Sigma(3, 1.0 / np.sqrt(inv_sigma2)), delta)
+
+
+def _robust(model: gtsam.noiseModel.Base, delta: float | None) -> gtsam.noiseModel.Base:
+    if delta is None:
+        return model
+    return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(delta), model)
+
+
+def lm_params(cfg: OptimConfig, max_iterations: int) -> gtsam.LevenbergMarquardtParams:
+    """Levenberg-Marquardt settings from the config (solver, ordering, early stop)."""
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(max_iterations)
+    params.setLinearSolverType(cfg.linear_solver)
+    params.setOrderingType(cfg.ordering)
+    params.setRelativeErrorTol(cfg.relative_error_tol)
+    return params
+
+
+def allocate_keys(*sizes: int) -> list[np.ndarray]:
+    """Consecutive integer gtsam keys for blocks of variables: `allocate_keys(K, P)` -> [0..K-1], [K..K+P-1].
+
+    Plain small integers (not gtsam.Symbol) so that key arrays can travel as float64 into gtsam's
+    vectorized helpers; a later block (object poses, object points) just adds a size.
+    """
+    bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    return [np.arange(a, b, dtype=np.int64) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def insert_poses(values: gtsam.Values, keys: np.ndarray, T: np.ndarray) -> None:
+    """Insert (n, 4, 4) transforms as Pose3 values."""
+    for key, T_k in zip(keys.tolist(), T):
+        values.insert(key, pose3_from_matrix(T_k))
+
+
+def insert_points(values: gtsam.Values, keys: np.ndarray, X: np.ndarray) -> None:
+    """Insert (n, 3) points as Point3 values."""
+    for key, X_j in zip(keys.tolist(), X):
+        values.insertPoint3(key, X_j)
+
+
+def extract_poses(values: gtsam.Values) -> np.ndarray:
+    """(n, 4, 4) of every Pose3 in `values`, in key order."""
+    rows = np.asarray(gtsam.utilities.extractPose3(values), dtype=float).reshape(-1, 12)
+    T = np.zeros((len(rows), 4, 4))
+    T[:, :3, :3] = rows[:, :9].reshape(-1, 3, 3)
+    T[:, :3, 3] = rows[:, 9:]
+    T[:, 3, 3] = 1.0
+    return T
+
+
+def extract_points(values: gtsam.Values) -> np.ndarray:
+    """(n, 3) of every Point3 in `values`, in key order."""
+    return np.asarray(gtsam.utilities.extractPoint3(values), dtype=float).reshape(-1, 3)
+
+
+def add_stereo_projection_factors(
+    graph: gtsam.NonlinearFactorGraph,
+    pose_keys: np.ndarray,
+    point_keys: np.ndarray,
+    meas: np.ndarray,
+    inv_sigma2: np.ndarray,
+    camera: StereoCamera,
+    huber_delta_mono: float | None,
+    huber_delta_stereo: float | None,
+) -> None:
+    """Add one reprojection term per observation (pose key = `T_w_c` Pose3, point key = world Point3).
+
+    Built in C++ by `gtsam.utilities.insertProjectionFactors` (one call per pose key, pyramid level and
+    mono/stereo), ~10x faster than constructing `GenericStereoFactor3D`s in a Python loop. A stereo
+    observation `[u, v, u_R]` becomes two built-in `GenericProjectionFactorCal3_S2`: the left camera
+    on (u, v) and the right camera (body_P_sensor = +baseline along x) on (u_R, v), each with sigmas
+    (s, s*sqrt(2)) so that v is counted once: the summed chi2 equals GenericStereoFactor3D's 3-dof
+    chi2 exactly. With a kernel, Huber applies to each camera's 2-vector (delta per factor).
+    """
+    calib = mono_calibration(camera)
+    right = gtsam.Pose3(gtsam.Rot3(), np.array([camera.baseline, 0.0, 0.0]))
+    stereo = meas[:, 2] >= 0
+    level_values, level = np.unique(inv_sigma2, return_inverse=True)
+    group = (np.asarray(pose_keys, dtype=np.int64) * len(level_values) + level) * 2 + stereo
+    order = np.argsort(group, kind="stable")
+    groups, starts = np.unique(group[order], return_index=True)
+    ends = np.append(starts[1:], len(order))
+    point_keys_f = np.asarray(point_keys, dtype=np.float64)
+    models: dict[tuple[int, bool], gtsam.noiseModel.Base] = {}
+    for g, a, b in zip(groups.tolist(), starts.tolist(), ends.tolist()):
+        idx = order[a:b]
+        is_st = bool(g % 2)
+        lvl = (g // 2) % len(level_values)
+        pose_key = g // 2 // len(level_values)
+        if (lvl, is_st) not in models:
+            sigma = 1.0 / np.sqrt(level_values[lvl])
+            if is_st:
+                base = gtsam.noiseModel.Diagonal.Sigmas(np.array([sigma, sigma * np.sqrt(2.0)]))
+                models[lvl, is_st] = _robust(base, huber_delta_stereo)
+            else:
+                models[lvl, is_st] = _robust(gtsam.noiseModel.Isotropic.Sigma(2, sigma), huber_delta_mono)
+        model = models[lvl, is_st]
+        keys = point_keys_f[idx]
+        m = meas[idx]
+        gtsam.utilities.insertProjectionFactors(graph, pose_key, keys, np.ascontiguousarray(m[:, :2].T), model, calib)
+        if is_st:
+            z_right = np.ascontiguousarray(m[:, [2, 1]].T)
+            gtsam.utilities.insertProjectionFactors(graph, pose_key, keys, z_right, model, calib, right)
