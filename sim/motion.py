@@ -1,0 +1,621 @@
+"""Kinematic trajectories: arc-length paths (curvature profiles) timed by smooth speed profiles.
+
+A `Trajectory` gives the planar pose (x, y, yaw) of an object's box centre at any time t:
+`s(t) = s0 + S(t - tau)` where `S` is the exact integral of a `SpeedProfile` (constant speeds
+joined by smoothstep ramps, so acceleration is continuous) and the `Path` maps arc length to
+(x, y, heading). Turns and lane changes are curvature profiles along the path (yaw rate =
+curvature * speed). A follower that copies a leader with a time delay and a gap (Newell's
+car-following model) is the same path and profile with a larger `tau` and a smaller `s0`, so
+platoons never collide. Velocities are central differences (h = 1e-4 s) of the closed form.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+_DT_DIFF = 1e-4  # s, central-difference step for velocities of the closed-form poses
+_DS = 0.05  # m, arc-length grid of paths
+
+
+@dataclass(frozen=True)
+class SpeedProfile:
+    """Speed through knots (t_k, v_k): constant outside, smoothstep 3x^2-2x^3 between knots."""
+
+    t_knots: np.ndarray
+    v_knots: np.ndarray
+
+    @staticmethod
+    def constant(v: float) -> "SpeedProfile":
+        return SpeedProfile(np.array([0.0, 1.0]), np.array([v, v], float))
+
+    @staticmethod
+    def of(knots: list[tuple[float, float]]) -> "SpeedProfile":
+        """From [(t, v), ...] with increasing t (a single knot means constant speed)."""
+        t = np.array([k[0] for k in knots], float)
+        v = np.array([k[1] for k in knots], float)
+        if len(t) == 1:
+            t, v = np.array([t[0], t[0] + 1.0]), np.array([v[0], v[0]])
+        return SpeedProfile(t, v)
+
+    def scaled(self, k: float) -> "SpeedProfile":
+        return SpeedProfile(self.t_knots, self.v_knots * k)
+
+    def _locate(self, t: np.ndarray):
+        tk = self.t_knots
+        i = np.clip(np.searchsorted(tk, t, side="right") - 1, 0, len(tk) - 2)
+        h = tk[i + 1] - tk[i]
+        x = np.clip((t - tk[i]) / h, 0.0, 1.0)
+        return i, h, x
+
+    def speed(self, t) -> np.ndarray:
+        t = np.asarray(t, float)
+        i, _, x = self._locate(t)
+        v0, v1 = self.v_knots[i], self.v_knots[i + 1]
+        return v0 + (v1 - v0) * x * x * (3.0 - 2.0 * x)
+
+    def distance(self, t) -> np.ndarray:
+        """Exact integral of the speed from 0 to t (negative for t < 0)."""
+        return self._antiderivative(np.asarray(t, float)) - self._antiderivative(np.zeros(1))[0]
+
+    def _antiderivative(self, t: np.ndarray) -> np.ndarray:
+        tk, vk = self.t_knots, self.v_knots
+        seg = np.diff(tk) * 0.5 * (vk[:-1] + vk[1:])
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        i, h, x = self._locate(t)
+        inside = cum[i] + h * (vk[i] * x + (vk[i + 1] - vk[i]) * (x ** 3 - 0.5 * x ** 4))
+        before = vk[0] * np.minimum(t - tk[0], 0.0)
+        after = vk[-1] * np.maximum(t - tk[-1], 0.0)
+        return inside + before + after
+
+
+@dataclass(frozen=True)
+class Path:
+    """Planar path by arc length s: grid of (x, y, heading); straight extension beyond both ends."""
+
+    s: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+
+    @staticmethod
+    def build(x0: float, y0: float, heading0: float, segments: list[tuple]) -> "Path":
+        """Segments: ("straight", L), ("turn", L, angle) with curvature k0*sin^2(pi u/L) turning by
+        `angle`, ("shift", L, dy) a lane change by dy to the left of the heading (curvature doublet)."""
+        kappa = [np.zeros(1)]
+        for seg in segments:
+            n = max(2, int(round(seg[1] / _DS)))
+            u = (np.arange(n) + 0.5) / n
+            if seg[0] == "straight":
+                kappa.append(np.zeros(n))
+            elif seg[0] == "turn":
+                kappa.append(2.0 * seg[2] / seg[1] * np.sin(np.pi * u) ** 2)
+            elif seg[0] == "shift":
+                kappa.append(_shift_curvature(seg[1], seg[2], n))
+            else:
+                raise ValueError(f"unknown path segment {seg[0]!r}")
+        k = np.concatenate(kappa)
+        return _integrate(x0, y0, heading0, k)
+
+    @property
+    def length(self) -> float:
+        return float(self.s[-1])
+
+    def pose(self, s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x, y, heading) at arc lengths s (cubic Hermite in x, y with the exact unit tangents)."""
+        s = np.asarray(s, float)
+        sc = np.clip(s, 0.0, self.s[-1])
+        i = np.clip(np.searchsorted(self.s, sc, side="right") - 1, 0, len(self.s) - 2)
+        ds = self.s[i + 1] - self.s[i]
+        u = (sc - self.s[i]) / ds
+        h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
+        h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
+        c0, s0 = np.cos(self.heading[i]), np.sin(self.heading[i])
+        c1, s1 = np.cos(self.heading[i + 1]), np.sin(self.heading[i + 1])
+        x = h00 * self.x[i] + h10 * ds * c0 + h01 * self.x[i + 1] + h11 * ds * c1
+        y = h00 * self.y[i] + h10 * ds * s0 + h01 * self.y[i + 1] + h11 * ds * s1
+        hd = self.heading[i] + u * (self.heading[i + 1] - self.heading[i])
+        extra = s - sc  # straight continuation outside [0, length]
+        return x + extra * np.cos(hd), y + extra * np.sin(hd), hd
+
+
+def _integrate(x0: float, y0: float, heading0: float, kappa: np.ndarray) -> Path:
+    n = len(kappa)
+    s = np.arange(n + 1) * _DS
+    k = np.concatenate([kappa, kappa[-1:]])
+    heading = heading0 + np.concatenate([[0.0], np.cumsum(0.5 * (k[:-1] + k[1:]) * _DS)])
+    mid = heading[:-1] + 0.5 * np.diff(heading)  # midpoint rule on each step
+    x = x0 + np.concatenate([[0.0], np.cumsum(np.cos(mid) * _DS)])
+    y = y0 + np.concatenate([[0.0], np.cumsum(np.sin(mid) * _DS)])
+    return Path(s, x, y, heading)
+
+
+def _shift_curvature(length: float, dy: float, n: int) -> np.ndarray:
+    """Curvature doublet A*sin(2 pi u) over `length` whose lateral displacement is dy (2 secant steps)."""
+    u = (np.arange(n) + 0.5) / n
+    shape = np.sin(2 * np.pi * u)
+    amp = 2 * np.pi * dy / length ** 2
+    for _ in range(3):
+        p = _integrate(0.0, 0.0, 0.0, amp * shape)
+        got = p.y[-1]
+        if abs(got) < 1e-12:
+            break
+        amp *= dy / got
+    return amp * shape
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Planar pose of a box centre over time: path(s0 + S(t - tau)), yaw = heading + yaw_offset."""
+
+    path: Path
+    speed: SpeedProfile
+    s0: float = 0.0
+    tau: float = 0.0
+    yaw_offset: float = 0.0
+
+    def arc(self, t) -> np.ndarray:
+        return self.s0 + self.speed.distance(np.asarray(t, float) - self.tau)
+
+    def pose(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x, y, yaw) arrays at times t."""
+        x, y, hd = self.path.pose(self.arc(t))
+        return x, y, hd + self.yaw_offset
+
+    def velocity(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(vx, vy, yaw_rate) at times t, central differences of `pose`."""
+        t = np.asarray(t, float)
+        xa, ya, qa = self.pose(t + _DT_DIFF)
+        xb, yb, qb = self.pose(t - _DT_DIFF)
+        k = 0.5 / _DT_DIFF
+        return (xa - xb) * k, (ya - yb) * k, (qa - qb) * k
+
+    def follower(self, delay: float, gap: float) -> "Trajectory":
+        """Newell follower on the same path: s_f(t) = s(t - delay) - gap."""
+        return Trajectory(self.path, self.speed, self.s0 - gap, self.tau + delay, self.yaw_offset)
+
+    def is_static(self) -> bool:
+        return bool(np.all(self.speed.v_knots == 0.0))
+
+
+def static_trajectory(x: float, y: float, yaw: float) -> Trajectory:
+    """An object that never moves."""
+    return Trajectory(Path.build(x, y, yaw, [("straight", 1.0)]), SpeedProfile.constant(0.0))
+
+
+def stop_and_go_profile(rng: np.random.Generator, v_nominal: float, t_end: float, stop_prob: float = 0.3,
+                        variation: float = 0.2) -> SpeedProfile:
+    """Speeds drawn around v_nominal at knots every 2.5-5 s, with occasional stops of 1.5-3 s
+    (braking/accelerating at <= ~3 m/s^2)."""
+    knots = [(-5.0, v_nominal * rng.uniform(1 - variation, 1 + variation))]
+    t = 0.0
+    while t < t_end + 5.0:
+        v_prev = knots[-1][1]
+        if rng.random() < stop_prob and v_nominal > 0:
+            ramp = max(1.5, v_prev / 3.0)
+            knots.append((t + ramp, 0.0))
+            t += ramp + rng.uniform(1.5, 3.0)
+            knots.append((t, 0.0))
+            v = v_nominal * rng.uniform(1 - variation, 1 + variation)
+            t += max(1.5, v / 2.5)
+            knots.append((t, v))
+        else:
+            v = v_nominal * rng.uniform(1 - variation, 1 + variation)
+            t += max(rng.uniform(2.5, 5.0), abs(v - v_prev) / 2.5)
+            knots.append((t, v))
+    return SpeedProfile.of(knots)
+
+
+@dataclass
+class Footprints:
+    """Oriented 2D rectangles (half length, half width) sampled over time, for overlap rejection."""
+
+    times: np.ndarray
+    xs: list = field(default_factory=list)
+    ys: list = field(default_factory=list)
+    yaws: list = field(default_factory=list)
+    halves: list = field(default_factory=list)
+
+    def add(self, traj: Trajectory, length: float, width: float) -> None:
+        x, y, q = traj.pose(self.times)
+        self.xs.append(x), self.ys.append(y), self.yaws.append(q)
+        self.halves.append((0.5 * length, 0.5 * width))
+
+    def collides(self, traj: Trajectory, length: float, width: float, margin: float = 0.5) -> bool:
+        """True if the rectangle on `traj` overlaps any stored one (grown by margin) at any sample time."""
+        if not self.xs:
+            return False
+        x, y, q = traj.pose(self.times)
+        X, Y, Q = np.array(self.xs), np.array(self.ys), np.array(self.yaws)  # (M, T)
+        H = np.array(self.halves)  # (M, 2)
+        hl1, hw1 = 0.5 * length + margin / 2, 0.5 * width + margin / 2
+        hl2, hw2 = H[:, :1] + margin / 2, H[:, 1:] + margin / 2
+        dx, dy = X - x, Y - y
+        axes = [(np.cos(q), np.sin(q)), (-np.sin(q), np.cos(q)), (np.cos(Q), np.sin(Q)), (-np.sin(Q), np.cos(Q))]
+        separated = np.zeros(X.shape, bool)
+        for ux, uy in axes:
+            r1 = hl1 * np.abs(np.cos(q) * ux + np.sin(q) * uy) + hw1 * np.abs(-np.sin(q) * ux + np.cos(q) * uy)
+            r2 = hl2 * np.abs(np.cos(Q) * ux + np.sin(Q) * uy) + hw2 * np.abs(-np.sin(Q) * ux + np.cos(Q) * uy)
+            separated |= np.abs(dx * ux + dy * uy) > r1 + r2
+        return bool((~separated).any())
+
+
+# ---------------------------------------------------------------------------------------------
+# Scenario planning: where the street is, who drives where and when.
+
+VEHICLE_DIMS = {  # (length, width, height) ranges in metres
+    "car": ((3.8, 4.7), (1.7, 1.9), (1.4, 1.6)),
+    "van": ((4.8, 5.4), (1.9, 2.1), (2.0, 2.5)),
+    "truck": ((7.0, 9.0), (2.4, 2.55), (3.0, 3.4)),
+    "pedestrian": ((0.45, 0.55), (0.55, 0.65), (1.6, 1.9)),
+}
+EGO_DIMS = (4.5, 1.9, 1.5)
+CAMERA_FORWARD = 0.5  # m, camera ahead of the ego box centre
+EGO_CLEARANCE = 3.0  # m kept free ahead of (and behind) the ego's box by every actor
+
+
+@dataclass(frozen=True)
+class StreetLayout:
+    """Street geometry in the MuJoCo world: the street runs along +x, y to the left, z up, road at z=0."""
+
+    lane_width: float
+    lanes_per_direction: int
+    half_road: float  # |y| of the edge of the driving lanes
+    kerb: float  # |y| of the kerb (driving lanes + parking strip)
+    sidewalk_outer: float  # |y| where the sidewalk ends and buildings start
+    x_lo: float
+    x_hi: float
+    x_int: float | None  # x of the crossing street (intersection layout) or None
+    cross_half: float  # half width of the crossing street road
+
+    def ego_lane_y(self) -> float:
+        return -0.5 * self.lane_width
+
+    def lane_y(self, index: int, oncoming: bool) -> float:
+        """Lane centre; index 0 is the lane next to the centre line; oncoming lanes are at y > 0."""
+        y = (index + 0.5) * self.lane_width
+        return y if oncoming else -y
+
+    def in_intersection(self, x: np.ndarray | float, margin: float = 0.0) -> np.ndarray | bool:
+        if self.x_int is None:
+            return np.zeros_like(np.asarray(x, float), bool) if np.ndim(x) else False
+        return np.abs(np.asarray(x) - self.x_int) < self.cross_half + margin
+
+
+@dataclass(frozen=True)
+class PlannedActor:
+    cls: str
+    dims: tuple[float, float, float]
+    trajectory: Trajectory
+
+
+@dataclass(frozen=True)
+class Prop:
+    """Static street furniture that occludes: kind "tree" or "pole" at (x, y)."""
+
+    kind: str
+    x: float
+    y: float
+
+
+@dataclass(frozen=True)
+class MotionPlan:
+    layout: StreetLayout
+    ego: Trajectory
+    actors: tuple[PlannedActor, ...]
+    props: tuple[Prop, ...]
+
+
+def _dims(rng: np.random.Generator, cls: str) -> tuple[float, float, float]:
+    return tuple(float(rng.uniform(*r)) for r in VEHICLE_DIMS[cls])  # type: ignore[return-value]
+
+
+def _ego_profile(cfg, rng: np.random.Generator, duration: float) -> SpeedProfile:
+    v = cfg.ego_speed
+    if cfg.layout == "following":
+        return stop_and_go_profile(rng, v, duration, stop_prob=0.15, variation=0.25)
+    if cfg.layout == "intersection":  # brake to a stop at the stop line, wait, go
+        t_b = 0.15 * duration
+        t_s = t_b + max(2.0, v / 2.5)
+        t_g = t_s + max(2.0, 0.3 * duration)
+        return SpeedProfile.of([(t_b, v), (t_s, 0.0), (t_g, 0.0), (t_g + max(2.5, v / 2.0), v)])
+    knots, t = [(0.0, v)], 0.0
+    while t < duration + 3.0:
+        t += rng.uniform(3.0, 5.0)
+        knots.append((t, v * rng.uniform(0.9, 1.1)))
+    return SpeedProfile.of(knots)
+
+
+def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
+    """Ego route, actors with collision-free trajectories and kerbside props for `cfg`."""
+    rng_ego, rng_park, rng_move, rng_ped, rng_prop = [np.random.default_rng(s) for s in seed_seq.spawn(5)]
+    duration = cfg.duration
+    lw, n_l = cfg.lane_width, cfg.lanes_per_direction
+    ego_speed = _ego_profile(cfg, rng_ego, duration)
+    ego_y = -0.5 * lw
+    ego = Trajectory(Path.build(0.0, ego_y, 0.0, [("straight", 1.0)]), ego_speed)
+    ego_end = float(ego.arc(duration))
+    half_road = n_l * lw
+    kerb = half_road + cfg.parking_width
+    x_int = None
+    cross_half = lw
+    if cfg.layout == "intersection":
+        x_stop = float(ego.arc(ego_speed.t_knots[2]))
+        x_int = x_stop + EGO_DIMS[0] / 2 + EGO_CLEARANCE + cross_half + 4.5
+    layout = StreetLayout(lw, n_l, half_road, kerb, kerb + cfg.sidewalk_width, -40.0,
+                          max(ego_end, x_int or 0.0) + cfg.view_ahead, x_int, cross_half)
+    times = np.arange(0.0, max(duration, 0.05) + 1e-9, 0.05)
+    fp = Footprints(times)
+    fp.add(ego, EGO_DIMS[0] + 2 * EGO_CLEARANCE, EGO_DIMS[1])
+    props = _plan_props(cfg, layout, rng_prop, ego_end)
+    for p in props:
+        fp.add(static_trajectory(p.x, p.y, 0.0), 0.8, 0.8)
+    actors: list[PlannedActor] = []
+
+    def try_add(make, tries: int = 40, margin: float = 0.5) -> PlannedActor | None:
+        """Draw candidates from `make()` until one overlaps nothing planned so far; None if all do."""
+        for _ in range(tries):
+            cls, dims, traj = make()
+            if not fp.collides(traj, dims[0], dims[1], margin):
+                fp.add(traj, dims[0], dims[1])
+                actors.append(PlannedActor(cls, dims, traj))
+                return actors[-1]
+        return None
+
+    n_parked = int(round(cfg.parked_fraction * cfg.n_vehicles))
+    _plan_moving(cfg, layout, rng_move, ego, ego_end, cfg.n_vehicles - n_parked, try_add)
+    _plan_parked(cfg, layout, rng_park, ego_end, n_parked, try_add)
+    _plan_pedestrians(cfg, layout, rng_ped, ego_end, try_add)
+    return MotionPlan(layout, ego, tuple(actors), tuple(props))
+
+
+def _plan_props(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float) -> list[Prop]:
+    spacing = 30.0 - 22.0 * cfg.occlusion
+    props = []
+    for side in (-1.0, 1.0):
+        x = layout.x_lo + rng.uniform(0, spacing)
+        while x < layout.x_hi:
+            if not layout.in_intersection(x, cfg.sidewalk_width + 1.0):
+                kind = "tree" if rng.random() < 0.6 else "pole"
+                props.append(Prop(kind, float(x), float(side * (layout.kerb + 0.7))))
+            x += spacing * rng.uniform(0.6, 1.4)
+    return props
+
+
+def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, n: int, try_add) -> None:
+    p_large = 0.15 + 0.5 * cfg.occlusion
+    margin = 2.0 - 1.6 * cfg.occlusion
+    y_strip = layout.half_road + 0.5 * cfg.parking_width
+
+    def make():
+        cls = "car" if rng.random() > p_large else ("van" if rng.random() < 0.65 else "truck")
+        dims = _dims(rng, cls)
+        side = -1.0 if rng.random() < 0.5 else 1.0
+        while True:
+            x = rng.uniform(-10.0, min(layout.x_hi - 10.0, ego_end + 70.0))
+            if not layout.in_intersection(x, cfg.sidewalk_width + dims[0] / 2 + 2.0):
+                break
+        y = side * (y_strip + rng.uniform(-0.15, 0.15) - 0.5 * max(0.0, dims[1] - 2.0))
+        yaw = (0.0 if side < 0 else np.pi) + rng.uniform(-0.04, 0.04)
+        return cls, dims, static_trajectory(x, y, yaw)
+
+    for _ in range(n):
+        try_add(make, margin=margin)
+
+
+def _moving_class(rng: np.random.Generator) -> str:
+    r = rng.random()
+    return "car" if r < 0.7 else ("van" if r < 0.9 else "truck")
+
+
+def _plan_moving(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Trajectory, ego_end: float,
+                 n: int, try_add) -> None:
+    """Moving vehicles: lane platoons (Newell followers), ego-lane leaders, crossing and turning traffic."""
+    duration, k = cfg.duration, cfg.object_speed
+    n_cross = 0
+    if cfg.layout == "intersection":
+        n_cross = int(round(0.65 * n))
+        _plan_cross_traffic(cfg, layout, rng, n_cross, try_add)
+    n_follow = 0
+    if cfg.layout == "following":
+        n_follow = int(round(0.6 * n))
+        _plan_followers(cfg, layout, rng, ego, n_follow, try_add)
+    lanes = [(i, False) for i in range(layout.lanes_per_direction)] + \
+            [(i, True) for i in range(layout.lanes_per_direction)]
+    dist = np.array([i if not onc else i + 1 for i, onc in lanes], float)
+    weights = (0.5 + cfg.occlusion) ** (-dist)
+    if cfg.layout != "street":  # ego lane is reserved for followers / the stop line
+        weights[0] = 0.0
+    weights /= weights.sum()
+    chosen = rng.choice(len(lanes), size=max(0, n - n_cross - n_follow), p=weights)
+    for lane_idx in range(len(lanes)):
+        count = int((chosen == lane_idx).sum())
+        if count:
+            _plan_lane(cfg, layout, rng, ego_end, lanes[lane_idx], count, try_add)
+
+
+def _plan_lane(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, lane: tuple[int, bool],
+               count: int, try_add) -> None:
+    index, oncoming = lane
+    duration, k = cfg.duration, cfg.object_speed
+    heading = np.pi if oncoming else 0.0
+    y = layout.lane_y(index, oncoming)
+    ego_lane = index == 0 and not oncoming
+    last: list[PlannedActor] = []  # the vehicle the next one follows
+
+    def make_leader():
+        cls = _moving_class(rng)
+        dims = _dims(rng, cls)
+        if ego_lane:  # ahead of the ego and faster, never stopping
+            x0 = rng.uniform(15.0, 40.0)
+            prof = stop_and_go_profile(rng, max(cfg.ego_speed * 1.3, 9.0) * max(k, 1.0), duration, 0.0, 0.1)
+        elif oncoming:
+            x0 = rng.uniform(0.3 * ego_end + 30.0, layout.x_hi)
+            prof = stop_and_go_profile(rng, rng.uniform(7.0, 13.0) * k, duration)
+        else:
+            x0 = rng.uniform(-15.0, ego_end + 60.0)
+            prof = stop_and_go_profile(rng, rng.uniform(6.0, 13.0) * k, duration)
+        segs: list[tuple] = [("straight", 1.0)]
+        if index > 0 and rng.random() < 0.3:  # lane change towards the centre line
+            segs = [("straight", rng.uniform(10.0, 60.0)), ("shift", rng.uniform(30.0, 45.0), layout.lane_width),
+                    ("straight", 1.0)]
+        path = Path.build(x0, y, heading, segs)
+        return cls, dims, Trajectory(path, prof)
+
+    def make_follower():
+        cls = _moving_class(rng)
+        dims = _dims(rng, cls)
+        gap = 0.5 * (last[0].dims[0] + dims[0]) + rng.uniform(2.5, 7.0)
+        return cls, dims, last[0].trajectory.follower(rng.uniform(0.8, 1.8), gap)
+
+    for _ in range(count):
+        added = try_add(make_follower if last else make_leader)
+        if added is not None:
+            last[:] = [added]
+
+
+def _plan_followers(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Trajectory, n: int,
+                    try_add) -> None:
+    """`following`: a platoon ahead in the ego lane driving the ego's speed profile earlier (Newell,
+    never slower than the ego) and vehicles in the next lane at a similar speed."""
+    k = cfg.object_speed
+    n_lane = n if cfg.lanes_per_direction == 1 else min(2, n)
+    ahead = [ego]
+    front = EGO_DIMS[0]
+    for _ in range(n_lane):
+        def make():
+            cls = _moving_class(rng)
+            dims = _dims(rng, cls)
+            gap = 0.5 * (front + dims[0]) + rng.uniform(6.0, 14.0)
+            lead = ahead[-1]
+            return cls, dims, Trajectory(lead.path, ego.speed.scaled(max(k, 1.0)), lead.s0 + gap,
+                                         lead.tau - rng.uniform(0.5, 1.2))
+        added = try_add(make)
+        if added is not None:
+            ahead.append(added.trajectory)
+            front = added.dims[0]
+    if cfg.lanes_per_direction == 1:
+        return
+    y = layout.lane_y(1, False)
+    last: list[PlannedActor] = []
+    for _ in range(n - n_lane):
+        def make():
+            cls = _moving_class(rng)
+            dims = _dims(rng, cls)
+            if last:
+                gap = 0.5 * (last[0].dims[0] + dims[0]) + rng.uniform(4.0, 12.0)
+                return cls, dims, last[0].trajectory.follower(rng.uniform(0.5, 1.5), gap)
+            prof = ego.speed.scaled(k * rng.uniform(0.95, 1.05))
+            return cls, dims, Trajectory(Path.build(rng.uniform(5.0, 30.0), y, 0.0, [("straight", 1.0)]), prof,
+                                         tau=rng.uniform(-1.5, 1.5))
+        added = try_add(make)
+        if added is not None:
+            last[:] = [added]
+
+
+def _turn_path(x_lane: float, heading0: float, heading1: float, y_target: float, approach: float) -> Path:
+    """Straight approach along the crossing street (heading0) then a smooth right turn onto the main
+    street at lane y_target (heading1), then straight."""
+    turn_len = 12.0
+    turn = Path.build(0.0, 0.0, heading0, [("turn", turn_len, heading1 - heading0)])
+    dy_turn = turn.y[-1]
+    y_turn_start = y_target - dy_turn
+    y_start = y_turn_start - approach * np.sin(heading0)
+    return Path.build(x_lane, y_start, heading0, [("straight", approach), ("turn", turn_len, heading1 - heading0),
+                                                  ("straight", 1.0)])
+
+
+def _plan_cross_traffic(cfg, layout: StreetLayout, rng: np.random.Generator, n: int, try_add) -> None:
+    """`crossing`: platoons on the crossing street in both directions, some turning right into the main street."""
+    x_int, lw, k, duration = layout.x_int, layout.lane_width, cfg.object_speed, cfg.duration
+    streams = [(x_int + 0.5 * lw, np.pi / 2), (x_int - 0.5 * lw, -np.pi / 2)]
+    last: dict[int, PlannedActor] = {}
+    for i in range(n):
+        stream = int(rng.integers(2))
+        x_lane, heading = streams[stream]
+
+        def make():
+            cls = _moving_class(rng)
+            dims = _dims(rng, cls)
+            if stream in last and rng.random() < 0.6:
+                prev = last[stream]
+                gap = 0.5 * (prev.dims[0] + dims[0]) + rng.uniform(3.0, 8.0)
+                return cls, dims, prev.trajectory.follower(rng.uniform(0.8, 1.6), gap)
+            prof = stop_and_go_profile(rng, rng.uniform(6.0, 11.0) * k, duration, stop_prob=0.1)
+            t_cross = rng.uniform(-0.1, 0.9) * duration  # when it reaches the main street
+            approach = 40.0
+            if rng.random() < 0.3:  # right turn into the main street
+                y_target = layout.lane_y(layout.lanes_per_direction - 1, heading < 0)
+                path = _turn_path(x_lane, heading, heading - np.pi / 2, y_target, approach)
+            else:
+                path = Path.build(x_lane, -np.sign(np.sin(heading)) * (approach + layout.kerb), heading,
+                                  [("straight", 1.0)])
+            s_at_cross = approach + layout.kerb - layout.half_road
+            tau = t_cross - _time_to_travel(prof, s_at_cross)
+            return cls, dims, Trajectory(path, prof, 0.0, tau)
+
+        added = try_add(make)
+        if added is not None:
+            last[stream] = added
+
+
+def _time_to_travel(prof: SpeedProfile, distance: float) -> float:
+    """First time t >= 0 at which prof.distance(t) reaches `distance` (coarse grid + linear interpolation)."""
+    t = np.linspace(0.0, 600.0, 60001)
+    d = prof.distance(t)
+    i = int(np.searchsorted(d, distance))
+    return float(t[min(i, len(t) - 1)])
+
+
+def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, try_add) -> None:
+    """Standing pedestrians (parked_fraction), kerb-to-kerb crossers (crosswalks in the intersection
+    layout, mid-block otherwise) and walkers along the sidewalks."""
+    n = cfg.n_pedestrians
+    n_standing = int(round(cfg.parked_fraction * n))
+    duration, k = cfg.duration, cfg.object_speed
+    sw_in, sw_out = layout.kerb, layout.sidewalk_outer
+    x_max = min(layout.x_hi - 10.0, ego_end + 60.0)
+
+    def sidewalk_x() -> float:
+        while True:
+            x = rng.uniform(0.0, x_max)
+            if not layout.in_intersection(x, 1.0):
+                return x
+
+    def standing():
+        dims = _dims(rng, "pedestrian")
+        side = -1.0 if rng.random() < 0.5 else 1.0
+        y = side * rng.uniform(sw_in + 0.8, sw_out - 0.6)
+        return "pedestrian", dims, static_trajectory(sidewalk_x(), y, rng.uniform(-np.pi, np.pi))
+
+    def crossing():
+        dims = _dims(rng, "pedestrian")
+        v = max(rng.uniform(1.2, 1.6) * k, 1e-3)
+        if layout.x_int is not None:
+            x = layout.x_int + (-1 if rng.random() < 0.6 else 1) * (layout.cross_half + 2.0) + rng.uniform(-1, 1)
+        else:
+            x = rng.uniform(10.0, max(20.0, ego_end + 50.0))
+        side = -1.0 if rng.random() < 0.5 else 1.0
+        y0, length = side * (layout.kerb + 1.0), 2.0 * (layout.kerb + 1.0)
+        t0 = rng.uniform(-0.4 * length / v if v > 0.1 else 0.0, 0.8 * duration)
+        t1 = t0 + length / v + 0.8
+        prof = SpeedProfile.of([(t0, 0.0), (t0 + 0.8, v), (t1 - 0.8, v), (t1, 0.0)])
+        heading = -side * np.pi / 2
+        return "pedestrian", dims, Trajectory(Path.build(x + rng.uniform(-0.5, 0.5), y0, heading, [("straight", 1.0)]),
+                                              prof)
+
+    def walking():
+        dims = _dims(rng, "pedestrian")
+        side = -1.0 if rng.random() < 0.5 else 1.0
+        y = side * rng.uniform(sw_in + 1.2, sw_out - 0.8)
+        heading = 0.0 if rng.random() < 0.5 else np.pi
+        prof = stop_and_go_profile(rng, rng.uniform(1.1, 1.6) * k, duration, stop_prob=0.15, variation=0.1)
+        return "pedestrian", dims, Trajectory(Path.build(sidewalk_x(), y, heading, [("straight", 1.0)]), prof)
+
+    for i in range(n):
+        if i < n_standing:
+            try_add(standing, margin=0.3)
+        else:
+            try_add(crossing if (i - n_standing) % 2 == 0 or layout.x_int is not None and i % 3 else walking,
+                    margin=0.3)

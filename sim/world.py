@@ -1,0 +1,373 @@
+"""The MuJoCo street world: scenery, textured vehicles and pedestrians on mocap bodies, stereo rig.
+
+Frames: `m` is the MuJoCo world (street along +x, y left, z up, road surface at z = 0). Each actor
+is one mocap root body whose origin is the centre of its 3D box (x forward, y left, z up) and whose
+geoms fill that box exactly (dims = (length, width, height)). The ego is a mocap body carrying the
+cameras `left` and `right` (right = left + baseline along the camera x axis).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim import textures as tex
+from sim.motion import CAMERA_FORWARD, MotionPlan, PlannedActor, Trajectory, plan_scenario
+from sim.scenarios import ScenarioConfig
+
+# OpenCV camera axes (x right, y down, z forward) expressed in the ego body frame (x fwd, y left, z up)
+R_BODY_CV = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+_VISUAL = dict(contype=0, conaffinity=0)
+_ROAD_SEGMENT = 20.0  # m of road per texture
+_TEXTURE_POOL = 8  # distinct road / sidewalk textures per world
+
+
+def camera_intrinsics(cfg: ScenarioConfig) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) of both cameras: fx = fy = (H/2)/tan(fovy/2), principal point at the image centre."""
+    w, h = cfg.image_size
+    f = 0.5 * h / math.tan(math.radians(cfg.fovy_effective_deg) / 2.0)
+    return f, f, (w - 1) / 2.0, (h - 1) / 2.0
+
+
+@dataclass
+class Actor:
+    track_id: int  # 1..N, stable per actor
+    cls: str  # "car" | "van" | "truck" | "pedestrian"
+    dims: tuple[float, float, float]  # (length, width, height) m of its 3D box
+    body_id: int  # mujoco body id (root, mocap)
+    parked: bool
+
+
+def _yaw_quat(yaw: np.ndarray) -> np.ndarray:
+    """(N, 4) MuJoCo quaternions (w, x, y, z) of rotations about +z."""
+    yaw = np.asarray(yaw, float)
+    return np.stack([np.cos(yaw / 2), np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2)], axis=-1)
+
+
+def _yaw_rot(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+class World:
+    """A compiled street scene and its motion; `set_time(t)` poses everything for time t."""
+
+    camera_left: str = "left"
+    camera_right: str = "right"
+
+    def __init__(self, model: mujoco.MjModel, cfg: ScenarioConfig, plan: MotionPlan, actors: list[Actor],
+                 ego_body: int, trajectories: list[Trajectory]):
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.cfg = cfg
+        self.plan = plan
+        self.actors = actors
+        self._trajectories = trajectories
+        self._heights = np.array([a.dims[2] for a in actors], float)
+        self._mocap_ids = np.array([model.body_mocapid[a.body_id] for a in actors], int)
+        self._ego_mocap = int(model.body_mocapid[ego_body])
+        self.set_time(0.0)
+
+    def _poses(self, t: float) -> np.ndarray:
+        """(N, 3) planar poses (x, y, yaw) of all actors at time t."""
+        out = np.empty((len(self._trajectories), 3))
+        for i, traj in enumerate(self._trajectories):
+            x, y, q = traj.pose(t)
+            out[i] = (x, y, q)
+        return out
+
+    def set_time(self, t: float) -> None:
+        """Write ego and actor mocap poses for time t, then mj_forward (cameras and geoms up to date)."""
+        if self.actors:
+            xyq = self._poses(t)
+            self.data.mocap_pos[self._mocap_ids] = np.column_stack([xyq[:, :2], 0.5 * self._heights])
+            self.data.mocap_quat[self._mocap_ids] = _yaw_quat(xyq[:, 2])
+        x, y, q = self.plan.ego.pose(t)
+        self.data.mocap_pos[self._ego_mocap] = (float(x), float(y), 0.0)
+        self.data.mocap_quat[self._ego_mocap] = _yaw_quat(float(q))
+        mujoco.mj_forward(self.model, self.data)
+
+    def ego_T_m_c(self, t: float) -> np.ndarray:
+        """4x4 pose of the left camera in the MuJoCo world, OpenCV axes (x right, y down, z forward)."""
+        x, y, q = (float(v) for v in self.plan.ego.pose(t))
+        R_m_b = _yaw_rot(q)
+        T_m_c = np.eye(4)
+        T_m_c[:3, :3] = R_m_b @ R_BODY_CV
+        T_m_c[:3, 3] = np.array([x, y, 0.0]) + R_m_b @ np.array([CAMERA_FORWARD, 0.0, self.cfg.cam_height])
+        return T_m_c
+
+    def actor_states(self, t: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per actor: T_m_o (4x4, box centre, x fwd, y left, z up), v_m (3,), w_m (3,) in the MuJoCo world."""
+        out = []
+        for traj, h in zip(self._trajectories, self._heights):
+            x, y, q = (float(v) for v in traj.pose(t))
+            vx, vy, wz = (float(v) for v in traj.velocity(t))
+            T_m_o = np.eye(4)
+            T_m_o[:3, :3] = _yaw_rot(q)
+            T_m_o[:3, 3] = (x, y, 0.5 * h)
+            out.append((T_m_o, np.array([vx, vy, 0.0]), np.array([0.0, 0.0, wz])))
+        return out
+
+
+class _Builder:
+    """Adds textures, materials and geoms to an MjSpec with unique names."""
+
+    def __init__(self, spec: mujoco.MjSpec, rich: bool):
+        self.spec = spec
+        self.rich = rich
+        self.n = 0
+
+    def material(self, img: np.ndarray | None, rgba=(1, 1, 1, 1), specular: float = 0.1,
+                 shininess: float = 0.2) -> str:
+        self.n += 1
+        name = f"mat{self.n}"
+        mat = self.spec.add_material(name=name, rgba=list(rgba), specular=specular, shininess=shininess)
+        if img is not None:
+            tname = f"tex{self.n}"
+            t = self.spec.add_texture(name=tname, type=mujoco.mjtTexture.mjTEXTURE_2D, width=img.shape[1],
+                                      height=img.shape[0], nchannel=3)
+            t.data = np.ascontiguousarray(img, np.uint8).tobytes()
+            mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = tname
+        return name
+
+    @staticmethod
+    def box(body, center, half, material: str, quat=None, group: int = 0):
+        kw = dict(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half), pos=list(center), material=material,
+                  group=group, **_VISUAL)
+        if quat is not None:
+            kw["quat"] = list(quat)
+        return body.add_geom(**kw)
+
+
+def build_world(cfg: ScenarioConfig) -> World:
+    """Plan the motion for cfg.seed, build the scene with MjSpec, compile it and wrap it in a World."""
+    seeds = np.random.SeedSequence(cfg.seed).spawn(3)
+    plan = plan_scenario(cfg, seeds[0])
+    rng_scene = np.random.default_rng(seeds[1])
+    rng_actor = np.random.default_rng(seeds[2])
+    spec = mujoco.MjSpec()
+    spec.modelname = f"street_{cfg.name}_{cfg.seed}"
+    b = _Builder(spec, cfg.texture == "rich")
+    _setup_visual(spec, cfg)
+    _add_scenery(b, plan, cfg, rng_scene)
+    bodies = []
+    for i, pa in enumerate(plan.actors):
+        body = spec.worldbody.add_body(name=f"actor{i + 1}", mocap=True, pos=[0, 0, pa.dims[2] / 2])
+        if pa.cls == "pedestrian":
+            _add_pedestrian(b, body, pa, rng_actor)
+        else:
+            _add_vehicle(b, body, pa, rng_actor)
+        bodies.append(body.name)
+    ego = spec.worldbody.add_body(name="ego", mocap=True)
+    fovy = cfg.fovy_effective_deg
+    ego.add_camera(name="left", pos=[CAMERA_FORWARD, 0.0, cfg.cam_height], xyaxes=[0, -1, 0, 0, 0, 1], fovy=fovy)
+    ego.add_camera(name="right", pos=[CAMERA_FORWARD, -cfg.baseline, cfg.cam_height], xyaxes=[0, -1, 0, 0, 0, 1],
+                   fovy=fovy)
+    model = spec.compile()
+    model.vis.map.znear = cfg.znear / model.stat.extent
+    model.vis.map.zfar = cfg.zfar / model.stat.extent
+    actors = [Actor(i + 1, pa.cls, pa.dims, model.body(name).id, pa.trajectory.is_static())
+              for i, (pa, name) in enumerate(zip(plan.actors, bodies))]
+    return World(model, cfg, plan, actors, model.body("ego").id, [pa.trajectory for pa in plan.actors])
+
+
+def _setup_visual(spec: mujoco.MjSpec, cfg: ScenarioConfig) -> None:
+    w, h = cfg.image_size
+    spec.visual.global_.offwidth = max(w, 640)
+    spec.visual.global_.offheight = max(h, 480)
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
+    spec.visual.headlight.specular = [0.05, 0.05, 0.05]
+    spec.visual.quality.shadowsize = 0
+    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+                     rgb1=[0.55, 0.68, 0.88], rgb2=[0.92, 0.94, 0.98], width=256, height=256)
+    spec.worldbody.add_light(name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, dir=[0.3, 0.5, -0.8],
+                             diffuse=[0.55, 0.55, 0.52], specular=[0.1, 0.1, 0.1], castshadow=False)
+
+
+def _add_scenery(b: _Builder, plan: MotionPlan, cfg: ScenarioConfig, rng: np.random.Generator) -> None:
+    lay = plan.layout
+    wb = b.spec.worldbody
+    rich = b.rich
+    x0, x1 = lay.x_lo - 30.0, lay.x_hi + 30.0
+    lines = [0.0, lay.half_road, -lay.half_road]
+    dashes = [s * i * lay.lane_width for i in range(1, lay.lanes_per_direction) for s in (-1, 1)]
+    road_w = 2 * lay.kerb
+    road_mats = [b.material(tex.asphalt(rng, road_w, _ROAD_SEGMENT, lines, dashes, rich=rich), specular=0.05)
+                 for _ in range(_TEXTURE_POOL)]
+    walk_mats = [b.material(tex.sidewalk(rng, cfg.sidewalk_width, _ROAD_SEGMENT, rich=rich), specular=0.05)
+                 for _ in range(_TEXTURE_POOL)]
+    n_seg = int(math.ceil((x1 - x0) / _ROAD_SEGMENT))
+    order = rng.permutation(n_seg) % _TEXTURE_POOL
+    sw_c = lay.kerb + cfg.sidewalk_width / 2
+    for i in range(n_seg):
+        xc = x0 + (i + 0.5) * _ROAD_SEGMENT
+        b.box(wb, (xc, 0, -0.05), (_ROAD_SEGMENT / 2, lay.kerb, 0.05), road_mats[order[i]])
+        for side in (-1, 1):
+            mat = walk_mats[(order[i] + (3 if side > 0 else 0)) % _TEXTURE_POOL]
+            if lay.x_int is not None and abs(xc - lay.x_int) < _ROAD_SEGMENT:
+                _sidewalk_split(b, wb, xc, side * sw_c, cfg.sidewalk_width, lay, mat)
+            else:
+                b.box(wb, (xc, side * sw_c, 0.075), (_ROAD_SEGMENT / 2, cfg.sidewalk_width / 2, 0.075), mat)
+    if lay.x_int is not None:
+        _add_intersection(b, lay, cfg, rng)
+    _add_buildings(b, lay, cfg, rng, x0, x1)
+    _add_props(b, plan, rng)
+
+
+def _sidewalk_split(b: _Builder, wb, xc: float, yc: float, width: float, lay, mat: str) -> None:
+    """A sidewalk segment with the crossing street cut out."""
+    lo, hi = xc - _ROAD_SEGMENT / 2, xc + _ROAD_SEGMENT / 2
+    for a, c in ((lo, min(hi, lay.x_int - lay.cross_half)), (max(lo, lay.x_int + lay.cross_half), hi)):
+        if c - a > 0.05:
+            b.box(wb, ((a + c) / 2, yc, 0.075), ((c - a) / 2, width / 2, 0.075), mat)
+
+
+def _add_intersection(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generator) -> None:
+    """Crossing street roads, crosswalk stripes, buildings along the crossing street."""
+    wb = b.spec.worldbody
+    length = 90.0
+    mat = b.material(tex.asphalt(rng, 2 * lay.cross_half, length, [0.0], [], rich=b.rich), specular=0.05)
+    q = _yaw_quat(np.pi / 2)
+    for side in (-1, 1):
+        yc = side * (lay.kerb + length / 2)
+        b.box(wb, (lay.x_int, yc, -0.05), (length / 2, lay.cross_half, 0.05), mat, quat=q)
+        for xs in (-1, 1):  # sidewalks along the crossing street
+            xc = lay.x_int + xs * (lay.cross_half + cfg.sidewalk_width / 2)
+            smat = b.material(tex.sidewalk(rng, cfg.sidewalk_width, length, rich=b.rich), specular=0.05)
+            b.box(wb, (xc, yc + side * cfg.sidewalk_width / 2, 0.075), (length / 2, cfg.sidewalk_width / 2, 0.075),
+                  smat, quat=q)
+    paint = b.material(None, rgba=(0.88, 0.88, 0.85, 1), specular=0.05)
+    for xs in (-1, 1):  # zebra stripes across the main street
+        xc = lay.x_int + xs * (lay.cross_half + 2.0)
+        y = -lay.kerb + 0.5
+        while y < lay.kerb - 0.5:
+            b.box(wb, (xc, y + 0.25, 0.002), (1.5, 0.25, 0.002), paint)
+            y += 1.0
+    for xs in (-1, 1):  # facades lining the crossing street
+        for side in (-1, 1):
+            y = lay.sidewalk_outer
+            while y < lay.sidewalk_outer + 70.0:
+                width = rng.uniform(8.0, 20.0)
+                height = rng.uniform(6.0, 25.0)
+                depth = rng.uniform(10.0, 14.0)
+                xc = lay.x_int + xs * (lay.cross_half + cfg.sidewalk_width + depth / 2)
+                fmat = b.material(tex.facade(rng, width, height, rich=b.rich))
+                b.box(wb, (xc, side * (y + width / 2), height / 2), (width / 2, depth / 2, height / 2), fmat, quat=q)
+                y += width
+
+
+def _add_buildings(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generator, x0: float, x1: float) -> None:
+    wb = b.spec.worldbody
+    for side in (-1, 1):
+        x = x0
+        while x < x1:
+            width = rng.uniform(8.0, 22.0)
+            if rng.random() < 0.15:  # alley
+                x += rng.uniform(2.0, 4.0)
+            a, c = x, x + width
+            x = c
+            if lay.x_int is not None:
+                cut = lay.cross_half + cfg.sidewalk_width
+                if c > lay.x_int - cut and a < lay.x_int + cut:
+                    continue
+            height = rng.uniform(6.0, 28.0)
+            depth = rng.uniform(10.0, 15.0)
+            setback = rng.uniform(0.0, 1.5)
+            yc = side * (lay.sidewalk_outer + setback + depth / 2)
+            mat = b.material(tex.facade(rng, width, height, rich=b.rich))
+            b.box(wb, ((a + c) / 2, yc, height / 2), (width / 2, depth / 2, height / 2), mat)
+            if setback > 0.05:  # forecourt pavement up to the facade
+                b.box(wb, ((a + c) / 2, side * (lay.sidewalk_outer + setback / 2), 0.07),
+                      (width / 2, setback / 2, 0.07), b.material(None, rgba=(0.55, 0.53, 0.5, 1)))
+    span = lay.sidewalk_outer + 15.0
+    for xe, sgn in ((x0 - 8.0, 1), (x1 + 8.0, -1)):  # end walls closing the street
+        height = rng.uniform(12.0, 25.0)
+        mat = b.material(tex.facade(rng, 2 * span, height, rich=b.rich))
+        b.box(wb, (xe, 0.0, height / 2), (8.0, span, height / 2), mat)
+
+
+def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
+    wb = b.spec.worldbody
+    barks = [b.material(tex.bark(rng, 128, rich=b.rich)) for _ in range(4)]
+    leaves = [b.material(tex.foliage(rng, 128, rich=b.rich)) for _ in range(4)]
+    metals = [b.material(tex.metal(rng, 64, rich=b.rich), specular=0.3) for _ in range(4)]
+    lamp = b.material(None, rgba=(0.9, 0.9, 0.8, 1))
+    for p in plan.props:
+        k = int(rng.integers(4))
+        if p.kind == "tree":
+            trunk_h = rng.uniform(3.6, 4.5)
+            wb.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[rng.uniform(0.12, 0.2), trunk_h / 2],
+                        pos=[p.x, p.y, trunk_h / 2], material=barks[k], **_VISUAL)
+            r = rng.uniform(1.3, 2.0)
+            wb.add_geom(type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[r, r, r * rng.uniform(0.9, 1.4)],
+                        pos=[p.x, p.y, trunk_h + r * 0.8], material=leaves[k], **_VISUAL)
+        else:
+            h = rng.uniform(5.0, 7.0)
+            wb.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.09, h / 2], pos=[p.x, p.y, h / 2],
+                        material=metals[k], **_VISUAL)
+            inward = -np.sign(p.y)
+            b.box(wb, (p.x, p.y + inward * 0.8, h), (0.25, 0.8, 0.06), metals[k])
+            b.box(wb, (p.x, p.y + inward * 1.5, h - 0.1), (0.2, 0.15, 0.06), lamp)
+            if rng.random() < 0.5:  # a sign board
+                b.box(wb, (p.x, p.y, rng.uniform(2.2, 3.0)), (0.04, 0.35, 0.3),
+                      b.material(tex.vehicle_paint(rng, 64, rich=b.rich)))
+
+
+def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) -> None:
+    """Boxes and wheels that fill the (L, W, H) box centred on the body origin exactly."""
+    L, W, H = pa.dims
+    size = 256
+    paint = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.4, shininess=0.6)
+    glass = b.material(tex.glass(rng, 128, rich=b.rich), specular=0.6, shininess=0.8)
+    tyre = b.material(None, rgba=(0.08, 0.08, 0.08, 1), specular=0.05)
+    z0 = -H / 2  # ground in body coordinates
+    r = {"car": 0.32, "van": 0.36, "truck": 0.5}[pa.cls]
+    if pa.cls == "car":
+        sill, belt = 0.25, 0.55 * H
+        b.box(body, (0, 0, z0 + (sill + belt) / 2), (L / 2, W / 2, (belt - sill) / 2), paint)
+        cab_l = 0.5 * L
+        b.box(body, (-0.05 * L, 0, z0 + (belt + H) / 2), (cab_l / 2, 0.45 * W, (H - belt) / 2), glass)
+    elif pa.cls == "van":
+        sill = 0.3
+        hood_l = 0.18 * L
+        b.box(body, (-hood_l / 2, 0, z0 + (sill + H) / 2), ((L - hood_l) / 2, W / 2, (H - sill) / 2), paint)
+        b.box(body, (L / 2 - hood_l / 2, 0, z0 + (sill + 0.5 * H) / 2), (hood_l / 2, W / 2, (0.5 * H - sill) / 2),
+              paint)
+        b.box(body, (L / 2 - hood_l - 0.02, 0, z0 + 0.72 * H), (0.03, 0.42 * W, 0.14 * H), glass)
+    else:  # truck: chassis, cab, cargo box
+        cab_l = 0.24 * L
+        b.box(body, (0, 0, z0 + 0.75), (L / 2, 0.45 * W, 0.25), tyre)
+        b.box(body, (L / 2 - cab_l / 2, 0, z0 + (0.6 + 0.8 * H) / 2), (cab_l / 2, 0.48 * W, (0.8 * H - 0.6) / 2),
+              paint)
+        b.box(body, (L / 2 - 0.02, 0, z0 + 0.65 * H), (0.02, 0.4 * W, 0.1 * H), glass)
+        cargo = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.2)
+        b.box(body, (-(cab_l + 0.1) / 2, 0, z0 + (1.0 + H) / 2), ((L - cab_l - 0.1) / 2, W / 2, (H - 1.0) / 2), cargo)
+    axle_x = L / 2 - r - 0.35 * (L / 4.5)
+    quat = [math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0]  # cylinder axis along y
+    for xs in (axle_x, -axle_x):
+        for ys in (1, -1):
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[r, 0.11], pos=[xs, ys * (W / 2 - 0.13), z0 + r],
+                          quat=quat, material=tyre, **_VISUAL)
+
+
+def _add_pedestrian(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) -> None:
+    """Legs (one forward, one back), torso, arms, neck and head filling the (L, W, H) box exactly."""
+    L, W, H = pa.dims
+    z0 = -H / 2
+    cloth = b.material(tex.clothing(rng, 64, rich=b.rich))
+    skin = b.material(tex.skin(rng, 32, rich=b.rich))
+    hip, shoulder, neck = 0.48 * H, 0.82 * H, 0.86 * H
+    leg = 0.07
+    for xs, ys in ((L / 2 - leg, 0.09), (-(L / 2 - leg), -0.09)):
+        b.box(body, (xs, ys, z0 + hip / 2), (leg, 0.075, hip / 2), cloth)
+    arm = 0.05
+    b.box(body, (0, 0, z0 + (hip + shoulder) / 2), (0.13, W / 2 - 2 * arm, (shoulder - hip) / 2), cloth)
+    for ys in (1, -1):
+        b.box(body, (rng.uniform(-0.08, 0.08), ys * (W / 2 - arm), z0 + (hip - 0.05 + shoulder) / 2),
+              (arm, arm, (shoulder - hip + 0.05) / 2), cloth)
+    b.box(body, (0, 0, z0 + (shoulder + neck) / 2), (0.05, 0.05, (neck - shoulder) / 2), skin)
+    b.box(body, (0.01, 0, z0 + (neck + H) / 2), (0.1, 0.085, (H - neck) / 2), skin)
