@@ -144,9 +144,9 @@ def stereo_camera_from_calib(
     if not (np.all(np.isfinite(P_left)) and np.all(np.isfinite(P_right))):
         raise InputError(f"{source}: non-finite values in {left} or {right}")
     K_left = P_left[:, :3]
-    if abs(np.linalg.det(K_left)) < 1e-12:
-        raise InputError(f"{source}: {left} has a singular intrinsic matrix")
-    t_rel = np.linalg.solve(K_left, P_right[:, 3] - P_left[:, 3])  # right-camera offset, metres
+    if not (K_left[0, 0] > 0 and K_left[1, 1] > 0 and K_left[2, 2] == 1.0):
+        raise InputError(f"{source}: {left} is not of the form K[I|t] with positive focal lengths")
+    t_rel = _solve_upper_K(K_left, P_right[:, 3] - P_left[:, 3])  # right-camera offset, metres
     baseline = -t_rel[0]
     if baseline > 0 and np.hypot(t_rel[1], t_rel[2]) > max_offset_ratio * baseline:
         raise InputError(
@@ -166,8 +166,16 @@ def reference_to_left(calib: dict, left: str = "P2") -> np.ndarray:
     """
     P_left = np.asarray(calib[left], dtype=float).reshape(3, 4)
     T_left_ref = np.eye(4)
-    T_left_ref[:3, 3] = np.linalg.solve(P_left[:, :3], P_left[:, 3])
+    T_left_ref[:3, 3] = _solve_upper_K(P_left[:, :3], P_left[:, 3])
     return T_left_ref
+
+
+def _solve_upper_K(K: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """K^-1 p for an upper-triangular K with K[2,2] = 1, by back-substitution (exact for p = (a, 0, 0))."""
+    tz = p[2]
+    ty = (p[1] - K[1, 2] * tz) / K[1, 1]
+    tx = (p[0] - K[0, 1] * ty - K[0, 2] * tz) / K[0, 0]
+    return np.array([tx, ty, tz])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -252,32 +260,51 @@ class TrackingLabel:
     score: float | None = None
 
 
-def _parse_label_line(tokens: list[str], path, lineno: int) -> TrackingLabel:
+def _check_label_tokens(tokens: list[str], path, lineno: int) -> None:
+    """Raise the InputError that describes what is wrong with one label line."""
     if len(tokens) not in (17, 18):
         raise InputError(f"{path}, line {lineno}: expected 17 columns (18 with score), got {len(tokens)}")
     try:
-        frame, track_id = int(tokens[0]), int(tokens[1])
+        int(tokens[0]), int(tokens[1])
     except ValueError:
         raise InputError(f"{path}, line {lineno}: frame and track id must be integers") from None
-    v = _floats(tokens[3:], path, lineno)
-    return TrackingLabel(
-        frame=frame,
-        track_id=track_id,
-        type=tokens[2],
-        truncated=float(v[0]),
-        occluded=int(v[1]),
-        alpha=float(v[2]),
-        box2d=tuple(float(x) for x in v[3:7]),
-        dims_hwl=tuple(float(x) for x in v[7:10]),
-        location=tuple(float(x) for x in v[10:13]),
-        rotation_y=float(v[13]),
-        score=float(v[14]) if len(v) == 15 else None,
-    )
+    _floats(tokens[3:], path, lineno)
 
 
 def labels_from_lines(lines: list[str], source="tracking labels") -> list[TrackingLabel]:
     """KITTI tracking label lines (blank lines skipped) -> labels."""
-    return [_parse_label_line(line.split(), source, lineno) for lineno, line in enumerate(lines, 1) if line.strip()]
+    numbered = [(lineno, line.split()) for lineno, line in enumerate(lines, 1) if line.strip()]
+    if not numbered:
+        return []
+    rows = [tokens for _, tokens in numbered]
+    try:
+        if any(len(r) not in (17, 18) for r in rows):
+            raise ValueError
+        ids_list = [(int(r[0]), int(r[1])) for r in rows]
+        values_list = [list(map(float, r[3:17])) for r in rows]
+        scores = [float(r[17]) if len(r) == 18 else None for r in rows]
+        if not np.all(np.isfinite(values_list)) or not all(s is None or math.isfinite(s) for s in scores):
+            raise ValueError
+    except ValueError:
+        for lineno, tokens in numbered:
+            _check_label_tokens(tokens, source, lineno)
+        raise
+    return [
+        TrackingLabel(
+            frame=i[0],
+            track_id=i[1],
+            type=r[2],
+            truncated=v[0],
+            occluded=int(v[1]),
+            alpha=v[2],
+            box2d=tuple(v[3:7]),
+            dims_hwl=tuple(v[7:10]),
+            location=tuple(v[10:13]),
+            rotation_y=v[13],
+            score=sc,
+        )
+        for r, i, v, sc in zip(rows, ids_list, values_list, scores)
+    ]
 
 
 def read_tracking_labels(path) -> list[TrackingLabel]:
@@ -356,15 +383,21 @@ def label_to_object_pose(label: TrackingLabel, T_w_c: np.ndarray) -> tuple[np.nd
     return np.asarray(T_w_c, dtype=float) @ T_c_o, (float(length), float(width), float(height))
 
 
+def labels_box_corners(labels: list[TrackingLabel]) -> np.ndarray:
+    """(N, 8, 3) corners of the labels' 3D boxes in the camera frame (KITTI devkit order)."""
+    hwl = np.array([label.dims_hwl for label in labels], dtype=float).reshape(-1, 3)
+    loc = np.array([label.location for label in labels], dtype=float).reshape(-1, 3)
+    ry = np.array([label.rotation_y for label in labels], dtype=float)
+    x = np.array([1, 1, -1, -1, 1, 1, -1, -1]) * (hwl[:, 2:3] / 2.0)
+    y = np.array([0, 0, 0, 0, -1, -1, -1, -1]) * hwl[:, 0:1]
+    z = np.array([1, -1, -1, 1, 1, -1, -1, 1]) * (hwl[:, 1:2] / 2.0)
+    c, s = np.cos(ry)[:, None], np.sin(ry)[:, None]
+    return np.stack([c * x + s * z, y, -s * x + c * z], axis=-1) + loc[:, None, :]
+
+
 def label_box_corners(label: TrackingLabel) -> np.ndarray:
-    """(8, 3) corners of a label's 3D box in the camera frame (KITTI devkit order)."""
-    height, width, length = label.dims_hwl
-    x = np.array([1, 1, -1, -1, 1, 1, -1, -1]) * (length / 2.0)
-    y = np.array([0, 0, 0, 0, -1, -1, -1, -1]) * height
-    z = np.array([1, -1, -1, 1, 1, -1, -1, 1]) * (width / 2.0)
-    c, s = math.cos(label.rotation_y), math.sin(label.rotation_y)
-    R = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    return (R @ np.stack([x, y, z])).T + np.asarray(label.location, dtype=float)
+    """(8, 3) corners of one label's 3D box in the camera frame."""
+    return labels_box_corners([label])[0]
 
 
 # ----------------------------------------------------------------------------------------------

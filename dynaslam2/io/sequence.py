@@ -43,7 +43,7 @@ from dynaslam2.io.types import FrameData, ObjectState
 
 FORMAT_NAME = "dynaslam2-sequence"
 FORMAT_VERSION = 1
-DEPTH_SCALE_M = 0.001  # depth PNGs hold millimetres
+DEPTH_PNG_UNITS_PER_M = 1000.0  # depth PNGs hold millimetres
 KITTI_FRAME_PERIOD_S = 0.1  # KITTI records at 10 Hz (used when a sequence has no times.txt)
 # What a sequence folder may contain; `--overwrite` removes only these and refuses anything else.
 SEQUENCE_DIRS = ("image_02", "image_03", "depth", "instances")
@@ -228,13 +228,13 @@ class SequenceWriter:
 def depth_to_png(depth_m: np.ndarray) -> np.ndarray:
     """float metres (0 / non-finite = none) -> uint16 millimetres, clipped to 65535."""
     depth_m = np.asarray(depth_m, dtype=np.float64)
-    mm = np.where(np.isfinite(depth_m) & (depth_m > 0), np.rint(depth_m / DEPTH_SCALE_M), 0.0)
+    mm = np.where(np.isfinite(depth_m) & (depth_m > 0), np.rint(depth_m * DEPTH_PNG_UNITS_PER_M), 0.0)
     return np.clip(mm, 0, 65535).astype(np.uint16)
 
 
 def depth_from_png(depth_mm: np.ndarray) -> np.ndarray:
     """uint16 millimetres -> float32 metres (0 = none)."""
-    return depth_mm.astype(np.float32) * np.float32(DEPTH_SCALE_M)
+    return depth_mm.astype(np.float32) / np.float32(DEPTH_PNG_UNITS_PER_M)
 
 
 # ----------------------------------------------------------------------------------------------
