@@ -14,7 +14,7 @@ import pytest
 
 from dynaslam2.errors import InputError
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import make_pose, so3_exp, yaw_pose
+from dynaslam2.geometry.se3 import make_pose, so3_exp
 from dynaslam2.io import FrameData, ObjectState, Sequence, SequenceWriter, open_sequence
 from dynaslam2.io.kitti import format_tracking_label, object_to_label, read_calib, read_tracking_labels
 

@@ -34,7 +34,12 @@ def write_text_atomic(path, text: str) -> None:
 
 
 def encode_png(image: np.ndarray, compression: int = 1) -> bytes:
-    """PNG bytes of a uint8/uint16 HxW or HxWx3 image; HxWx3 arrays are taken as RGB (stored correctly)."""
+    """PNG bytes of a uint8/uint16 HxW or HxWx3 image; HxWx3 arrays are taken as RGB (stored correctly).
+
+    Fast settings (measured on this project's images): the SUB filter everywhere, zlib's RLE strategy
+    for 8-bit images (2-4x faster than libpng's adaptive filters at a similar size), the default
+    strategy for 16-bit depth/instance images (which it compresses far better).
+    """
     image = np.asarray(image)
     if image.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"PNG images must be uint8 or uint16, got {image.dtype}")
@@ -42,7 +47,10 @@ def encode_png(image: np.ndarray, compression: int = 1) -> bytes:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
     elif image.ndim != 2:
         raise ValueError(f"PNG images must be HxW or HxWx3, got shape {image.shape}")
-    ok, buf = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, int(compression)])
+    strategy = cv2.IMWRITE_PNG_STRATEGY_RLE if image.dtype == np.uint8 else cv2.IMWRITE_PNG_STRATEGY_DEFAULT
+    params = [cv2.IMWRITE_PNG_COMPRESSION, int(compression), cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB,
+              cv2.IMWRITE_PNG_STRATEGY, strategy]
+    ok, buf = cv2.imencode(".png", image, params)
     if not ok:
         raise ValueError(f"PNG encoding failed for an image of shape {image.shape}")
     return buf.tobytes()

@@ -11,6 +11,7 @@ import fnmatch
 import json
 import os
 import shutil
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
@@ -37,7 +38,6 @@ from dynaslam2.io.kitti import (
     reference_to_left,
     stereo_camera_from_calib,
     write_calib,
-    write_instance_png,
 )
 from dynaslam2.io.types import FrameData, ObjectState
 
@@ -49,6 +49,7 @@ KITTI_FRAME_PERIOD_S = 0.1  # KITTI records at 10 Hz (used when a sequence has n
 SEQUENCE_DIRS = ("image_02", "image_03", "depth", "instances")
 SEQUENCE_FILES = ("calib.txt", "label_02.txt", "poses.txt", "times.txt", "objects.jsonl", "meta.json")
 REPLACEABLE_PATTERNS = ("preview*", ".*.tmp")
+PNG_WRITER_THREADS = 4  # one per image of a frame (left, right, instances, depth)
 
 
 def _frame_name(i: int) -> str:
@@ -166,6 +167,7 @@ class SequenceWriter:
         for d in SEQUENCE_DIRS:
             if d != "depth" or self.with_depth:
                 (self.out_dir / d).mkdir()
+        self._pool = ThreadPoolExecutor(max_workers=PNG_WRITER_THREADS, thread_name_prefix="png-writer")
         self._logs = {
             name: AppendLog(self.out_dir / name) for name in ("poses.txt", "times.txt", "label_02.txt", "objects.jsonl")
         }
@@ -192,12 +194,14 @@ class SequenceWriter:
         labels = [format_tracking_label(object_to_label(obj, T_w_c, i)) for obj in objects]
         record = json.dumps({"frame": i, "objects": [_object_record(obj) for obj in objects]})
         name = _frame_name(i)
-        write_png_atomic(self.out_dir / "image_02" / name, left)
-        write_png_atomic(self.out_dir / "image_03" / name, right)
+        images = [(self.out_dir / "image_02" / name, left), (self.out_dir / "image_03" / name, right),
+                  (self.out_dir / "instances" / name, instances)]
         if self.with_depth:
             depth = self._check_image("depth", frame.depth, np.float32, None)
-            write_png_atomic(self.out_dir / "depth" / name, depth_to_png(depth))
-        write_instance_png(self.out_dir / "instances" / name, instances)
+            images.append((self.out_dir / "depth" / name, depth_to_png(depth)))
+        # PNG encoding releases the GIL: encode the images in parallel, all done before any log line.
+        for future in [self._pool.submit(write_png_atomic, path, image) for path, image in images]:
+            future.result()
         self._logs["poses.txt"].write_line(format_pose_line(T_w_c))
         self._logs["times.txt"].write_line(f"{float(frame.timestamp):.9e}")
         for line in labels:
@@ -206,6 +210,7 @@ class SequenceWriter:
         self.frames_written = i + 1
 
     def _close_logs(self) -> None:
+        self._pool.shutdown(wait=True)
         for log in self._logs.values():
             log.close()
 
