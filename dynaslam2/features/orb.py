@@ -1,9 +1,8 @@
 """ORB features on an image pyramid, spread over the image (ORB-SLAM2's ORBextractor, ref. [1]).
 
-Per level: FAST is run once at `min_th_fast` with non-maximum suppression; a cell (~`cell_size` px)
-keeps its corners scoring >= `ini_th_fast` and falls back to the weaker ones only where it has none
-(FAST's score does not depend on the detection threshold, so this equals ORB-SLAM2's two-pass per-cell
-detection). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
+Per level: one FAST pass (non-maximum suppression) at `min_th_fast`; each cell of ORB-SLAM2's grid
+(~`cell_size` px) keeps its corners scoring >= `ini_th_fast`, or the weaker ones where it has none:
+the same set as ORB-SLAM2's two FAST passes per cell (see `_detect`). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
 the largest square cell for which at least the level's budget of cells is occupied, the best response
 per cell, then the budget's best of those. Orientation is the intensity centroid (IC_Angle) on the
 level image; the rBRIEF descriptor is OpenCV's ORB on the Gaussian-blurred level (same pattern and
@@ -99,33 +98,41 @@ def _ic_kernels() -> tuple[np.ndarray, np.ndarray]:
     return w_u.ravel(), w_v.ravel()
 
 
-def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, extent: float) -> np.ndarray:
-    """Indices of <= n_keep points spread over the image: best response per cell of the largest square
-    grid with >= n_keep occupied cells, then the n_keep best of those (ties by index: deterministic)."""
+def _cell_keys(xy: np.ndarray, cell: float) -> np.ndarray:
+    ij = (xy / cell).astype(np.int64)  # xy >= 0
+    return ij[:, 1] * (int(ij[:, 0].max()) + 1) + ij[:, 0]
+
+
+def _n_occupied(xy: np.ndarray, cell: float) -> int:
+    keys = _cell_keys(xy, cell)
+    occupied = np.zeros(int(keys.max()) + 1, bool)
+    occupied[keys] = True
+    return int(np.count_nonzero(occupied))
+
+
+def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, area: float, tol: float = 1.05) -> np.ndarray:
+    """Indices of <= n_keep points spread over the image: the best response in each cell of the largest
+    square grid (within a factor `tol`) with >= n_keep occupied cells, then the n_keep best of those.
+    Ties go to the lower index (deterministic). `xy` must be >= 0; `area` is the image area in px^2."""
     n = len(xy)
     if n <= n_keep:
         return np.arange(n)
-    order = np.lexsort((np.arange(n), -response))  # best first
+    order = np.argsort(-response, kind="stable")  # best first
     xy_sorted = xy[order]
-
-    def winners(cell: float) -> np.ndarray:
-        ij = np.floor(xy_sorted / cell).astype(np.int64)
-        key = ij[:, 1] * (int(extent / cell) + 2) + ij[:, 0]
-        _, first = np.unique(key, return_index=True)
-        return first
-
-    lo, hi = 1.0, float(extent)
-    best = winners(lo)
-    if len(best) >= n_keep:
-        while hi - lo > 0.5:
-            mid = 0.5 * (lo + hi)
-            w = winners(mid)
-            if len(w) >= n_keep:
-                lo, best = mid, w
-            else:
-                hi = mid
-    best = np.sort(best)[:n_keep]  # sorted positions = descending response
-    return order[best]
+    # A grid of 2*sqrt(area/n_keep) cells has < n_keep cells: an upper bound; 1 px cells: n occupied.
+    lo, hi = 1.0, 2.0 * np.sqrt(area / n_keep)
+    while hi / lo > tol:
+        mid = np.sqrt(lo * hi)
+        if _n_occupied(xy_sorted, mid) >= n_keep:
+            lo = mid
+        else:
+            hi = mid
+    keys = _cell_keys(xy_sorted, lo)
+    by_key = np.argsort(keys, kind="stable")  # within a cell: best response first
+    k_sorted = keys[by_key]
+    winners = by_key[np.r_[True, k_sorted[1:] != k_sorted[:-1]]]
+    winners.sort()  # positions in the response order
+    return order[winners[:n_keep]]
 
 
 class ORBExtractor:
@@ -172,33 +179,40 @@ class ORBExtractor:
         return Keypoints.concatenate([p for p in parts if p is not None])
 
     def _detect(self, level: int, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """FAST candidates (integer xy at this level, response) after the per-cell threshold rule and the mask."""
+        """FAST candidates (integer xy at this level, score) by ORB-SLAM2's per-cell rule: a cell keeps its
+        corners scoring >= ini_th_fast, or those >= min_th_fast where it has none. One FAST pass at
+        min_th_fast: the score does not depend on the detection threshold and a suppressing neighbour
+        scores higher, so thresholding the scores gives exactly FAST at ini_th_fast (measured faster
+        here than a second FAST pass on the empty cells). Masked-out corners are dropped first."""
         cfg = self.cfg
         edge = cfg.edge_threshold
         h, w = img.shape
-        if w <= 2 * edge or h <= 2 * edge:
+        border = edge - 3  # ORB-SLAM2's minBorderX: cells cover [border, size - border), corners >= 3 px inside
+        if w - 2 * border < 7 or h - 2 * border < 7:
             return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
         kps = self._fast.detect(img)
         if not kps:
             return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
         xy = cv2.KeyPoint.convert(kps)
         resp = np.fromiter((k.response for k in kps), np.float32, len(kps))
-        inside = (xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)
-        xy, resp = xy[inside], resp[inside]
-        n_cx = max(1, (w - 2 * edge) // cfg.cell_size)
-        n_cy = max(1, (h - 2 * edge) // cfg.cell_size)
-        cw = int(np.ceil((w - 2 * edge) / n_cx))
-        ch = int(np.ceil((h - 2 * edge) / n_cy))
-        cell = ((xy[:, 1].astype(np.int64) - edge) // ch) * n_cx + (xy[:, 0].astype(np.int64) - edge) // cw
+        keep = (xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)
+        xy, resp = xy[keep], resp[keep]
+        if mask is not None:
+            s = self.scale_factors[level]
+            col = np.clip(np.rint(xy[:, 0] * s).astype(np.int64), 0, mask.shape[1] - 1)
+            row = np.clip(np.rint(xy[:, 1] * s).astype(np.int64), 0, mask.shape[0] - 1)
+            keep = mask[row, col]
+            xy, resp = xy[keep], resp[keep]
+        n_cx = max(1, (w - 2 * border) // cfg.cell_size)
+        n_cy = max(1, (h - 2 * border) // cfg.cell_size)
+        cw = int(np.ceil((w - 2 * border) / n_cx))
+        ch = int(np.ceil((h - 2 * border) / n_cy))
+        cx = np.minimum((xy[:, 0].astype(np.int64) - edge) // cw, n_cx - 1)
+        cy = np.minimum((xy[:, 1].astype(np.int64) - edge) // ch, n_cy - 1)
+        cell = cy * n_cx + cx
         strong = resp >= cfg.ini_th_fast
         has_strong = np.bincount(cell[strong], minlength=n_cx * n_cy) > 0
         keep = strong | ~has_strong[cell]
-        if mask is not None:
-            s = self.scale_factors[level]
-            H0, W0 = mask.shape
-            col = np.clip(np.rint(xy[:, 0] * s).astype(np.int64), 0, W0 - 1)
-            row = np.clip(np.rint(xy[:, 1] * s).astype(np.int64), 0, H0 - 1)
-            keep &= mask[row, col]
         return xy[keep], resp[keep]
 
     def _angles(self, img: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -214,7 +228,10 @@ class ORBExtractor:
     def _describe(self, level: int, img: np.ndarray, xy: np.ndarray, angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """rBRIEF descriptors on the blurred level (OpenCV's ORB); returns (kept indices, descriptors)."""
         size = float(self.cfg.patch_size)
-        kps = [cv2.KeyPoint(float(x), float(y), size, float(a), 0.0, 0, i) for i, ((x, y), a) in enumerate(zip(xy, angle))]
+        kps = [
+            cv2.KeyPoint(x, y, size, a, 0.0, 0, i)
+            for i, (x, y, a) in enumerate(zip(xy[:, 0].tolist(), xy[:, 1].tolist(), angle.tolist()))
+        ]
         kps_out, desc = self._orb.compute(img, kps)
         if desc is None or not kps_out:
             return np.zeros(0, np.int64), np.zeros((0, 32), np.uint8)
@@ -228,7 +245,7 @@ class ORBExtractor:
         xy, resp = self._detect(level, img, mask)
         if len(xy) == 0:
             return None
-        keep = spread_best(xy, resp, budget, float(max(img.shape)))
+        keep = spread_best(xy, resp, budget, float(img.shape[0] * img.shape[1]))
         keep.sort()
         xy, resp = xy[keep], resp[keep]
         angle = self._angles(img, xy)

@@ -44,48 +44,53 @@ def _row_candidates(kp_left: Keypoints, kp_right: Keypoints, n_rows: int, scale_
     return i, j[np.repeat(starts[row_left], count) + offs]
 
 
-def _sad_refine(img_l, img_r, uv_l, u_r0, inv_scale, w: int, L: int, centre: str):
-    """SAD search at one level (patches minus their centre pixel or their mean). Returns (ok, best offset, sub-pixel delta, best SAD) per keypoint."""
-    su_l = np.rint(uv_l[:, 0] * inv_scale).astype(np.int64)
-    sv_l = np.rint(uv_l[:, 1] * inv_scale).astype(np.int64)
-    su_r = np.rint(u_r0 * inv_scale).astype(np.int64)
+def _gather_patches(img_l, img_r, su_l, sv_l, su_r, w: int, L: int):
+    """Left (K,k,k) patches and right (K,k,k+2L) strips around integer level coordinates; `ok` where inside."""
     rows, cols = img_l.shape
     ok = (sv_l - w >= 0) & (sv_l + w < rows) & (su_l - w >= 0) & (su_l + w < cols)
     ok &= (su_r - L - w >= 0) & (su_r + L + w < cols)
-    n = len(uv_l)
-    inc = np.zeros(n, np.int64)
-    delta = np.zeros(n, np.float64)
-    sad = np.zeros(n, np.float64)
     idx = np.flatnonzero(ok)
-    if len(idx) == 0:
-        return ok, inc, delta, sad
     k = 2 * w + 1
-    patch_l = sliding_window_view(img_l, (k, k))[sv_l[idx] - w, su_l[idx] - w].astype(np.float32)
+    patch_l = sliding_window_view(img_l, (k, k))[sv_l[idx] - w, su_l[idx] - w]
+    strip = sliding_window_view(img_r, (k, k + 2 * L))[sv_l[idx] - w, su_r[idx] - L - w]
+    return ok, patch_l, strip
+
+
+def _sad_curve(patch_l: np.ndarray, strip: np.ndarray, w: int, L: int, centre: str) -> np.ndarray:
+    """(K, 2L+1) SAD of the left patch against the right windows at offsets -L..L, both brightness-
+    normalized by their centre pixel ("pixel", ORB-SLAM2) or their mean ("mean")."""
+    K = len(patch_l)
+    k, n_off = 2 * w + 1, 2 * L + 1
+    patch_l = patch_l.astype(np.float32)
+    strip = strip.astype(np.float32)
     if centre == "pixel":
-        patch_l -= patch_l[:, w : w + 1, w : w + 1]
+        ref_l = patch_l[:, w, w]
+        ref_r = strip[:, w, w : w + n_off]  # centre pixel of the window at each offset
     else:
-        patch_l -= patch_l.mean(axis=(1, 2), keepdims=True)
-    strip = sliding_window_view(img_r, (k, k + 2 * L))[sv_l[idx] - w, su_r[idx] - L - w].astype(np.float32)
-    patch_r = sliding_window_view(strip, k, axis=2)  # (K, k rows, 2L+1 offsets, k cols)
-    if centre == "pixel":
-        patch_r = patch_r - patch_r[:, w : w + 1, :, w : w + 1]
-    else:
-        patch_r = patch_r - patch_r.mean(axis=(1, 3), keepdims=True)
-    dists = np.abs(patch_r - patch_l[:, :, None, :]).sum(axis=(1, 3))  # (K, 2L+1)
+        ref_l = patch_l.reshape(K, -1).mean(axis=1)
+        col_sum = np.concatenate([np.zeros((K, 1), np.float32), np.cumsum(strip.sum(axis=1), axis=1)], axis=1)
+        ref_r = (col_sum[:, k:] - col_sum[:, :-k]) / (k * k)  # box mean of the window at each offset
+    centred_l = patch_l - ref_l[:, None, None]
+    dists = np.empty((K, n_off), np.float32)
+    for o in range(n_off):  # loop over the 2L+1 offsets, vectorized over keypoints
+        diff = strip[:, :, o : o + k] - centred_l
+        diff -= ref_r[:, o, None, None]
+        dists[:, o] = np.abs(diff, out=diff).reshape(K, -1).sum(axis=1)
+    return dists
+
+
+def _parabola(dists: np.ndarray, L: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Best offset (-L..L), sub-pixel delta of the parabola through the best and its neighbours, best SAD,
+    and `ok` (best not at the border of the search, finite vertex)."""
     best = np.argmin(dists, axis=1)
     interior = (best > 0) & (best < 2 * L)
     b = np.clip(best, 1, 2 * L - 1)
-    rr = np.arange(len(idx))
-    d1, d2, d3 = dists[rr, b - 1], dists[rr, b], dists[rr, b + 1]
-    denom = 2.0 * (d1 + d3 - 2.0 * d2)
+    rr = np.arange(len(dists))
+    d1, d2, d3 = (dists[rr, b - 1].astype(np.float64), dists[rr, b].astype(np.float64), dists[rr, b + 1].astype(np.float64))
     with np.errstate(divide="ignore", invalid="ignore"):
-        dl = (d1 - d3) / denom
-    good = interior & np.isfinite(dl)
-    ok[idx] = good
-    inc[idx] = best - L
-    delta[idx] = np.where(good, dl, 0.0)
-    sad[idx] = d2
-    return ok, inc, delta, sad
+        delta = (d1 - d3) / (2.0 * (d1 + d3 - 2.0 * d2))
+    ok = interior & np.isfinite(delta)
+    return best - L, np.where(ok, delta, 0.0), dists[rr, best].astype(np.float64), ok
 
 
 def match_stereo(
@@ -117,28 +122,40 @@ def match_stereo(
     i, j = i[keep], j[keep]
     if len(i) == 0:
         return u_right, depth
-    dist = hamming_pairs(kp_left.desc[i], kp_right.desc[j])
-    order = np.lexsort((j, dist, i))  # per left keypoint: smallest distance, then lowest right index
-    i, j, dist = i[order], j[order], dist[order]
-    first = np.r_[True, i[1:] != i[:-1]]
-    i, j, dist = i[first], j[first], dist[first]
-    good = dist < min(cfg.th_high, (cfg.th_high + cfg.th_low) / 2.0)
-    i, j = i[good], j[good]
+    dist = hamming_pairs(kp_left.desc[i], kp_right.desc[j]).astype(np.int64)
+    # Pairs are grouped by left index (increasing right index inside a group): the best per group is
+    # the smallest (distance, position) key, i.e. ORB-SLAM2's first strict minimum.
+    starts = np.flatnonzero(np.r_[True, i[1:] != i[:-1]])
+    key = np.minimum.reduceat(dist * len(i) + np.arange(len(i)), starts)
+    best = key % len(i)
+    good = dist[best] < min(cfg.th_high, (cfg.th_high + cfg.th_low) / 2.0)
+    i, j = i[best[good]], j[best[good]]
+    if len(i) == 0:
+        return u_right, depth
 
-    best_ur = np.zeros(len(i))
-    sad = np.zeros(len(i))
+    w, L = cfg.sad_window, cfg.sad_search
+    octave = kp_left.octave[i]
+    inv_s = 1.0 / scale_factors[octave]
+    su_l = np.rint(kp_left.uv[i, 0] * inv_s).astype(np.int64)
+    sv_l = np.rint(kp_left.uv[i, 1] * inv_s).astype(np.int64)
+    su_r = np.rint(u_r[j] * inv_s).astype(np.int64)
+    order = np.argsort(octave, kind="stable")  # gather level by level, then one SAD pass
+    i, octave, su_l, sv_l, su_r = i[order], octave[order], su_l[order], sv_l[order], su_r[order]
     ok = np.zeros(len(i), bool)
-    for level in np.unique(kp_left.octave[i]):
-        sel = np.flatnonzero(kp_left.octave[i] == level)
-        s = scale_factors[level]
-        ok_l, inc, delta, sad_l = _sad_refine(
-            pyr_left[level], pyr_right[level], kp_left.uv[i[sel]].astype(np.float64), u_r[j[sel]], 1.0 / s, cfg.sad_window, cfg.sad_search, cfg.sad_centre
-        )
-        ok_l &= np.abs(delta) <= cfg.max_subpixel_delta
-        su_r = np.rint(u_r[j[sel]] / s)
-        best_ur[sel] = s * (su_r + inc + delta)
-        sad[sel] = sad_l
+    patches_l, strips = [], []
+    for level in np.unique(octave):
+        sel = slice(*np.searchsorted(octave, [level, level + 1]))
+        ok_l, patch_l, strip = _gather_patches(pyr_left[level], pyr_right[level], su_l[sel], sv_l[sel], su_r[sel], w, L)
         ok[sel] = ok_l
+        patches_l.append(patch_l)
+        strips.append(strip)
+    i, octave, su_r = i[ok], octave[ok], su_r[ok]
+    if len(i) == 0:
+        return u_right, depth
+    dists = _sad_curve(np.concatenate(patches_l), np.concatenate(strips), w, L, cfg.sad_centre)
+    inc, delta, sad, ok = _parabola(dists, L)
+    ok &= np.abs(delta) <= cfg.max_subpixel_delta
+    best_ur = scale_factors[octave] * (su_r + inc + delta)
     disparity = u_l[i] - best_ur
     ok &= (disparity >= min_d) & (disparity < max_d)
     i, best_ur, disparity, sad = i[ok], best_ur[ok], disparity[ok], sad[ok]
