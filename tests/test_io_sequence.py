@@ -348,3 +348,29 @@ def test_kitti_tracking_layout_with_real_calib_and_labels(tmp_path):
             assert np.allclose(uv, uvw[:2] / uvw[2], atol=0.05)
             assert np.all(np.isnan(obj.v_w)) and obj.extra["kitti_truncated"] == lb.truncated
     assert len(open_sequence(root, sequence="0000").gt_labels(n)) == 0  # labels past the images are dropped
+
+
+def test_layout_without_meta_and_objects_uses_labels_and_poses(tmp_path):
+    """A hand-made layout (no meta.json, no objects.jsonl): GT objects come from label_02 + poses.txt."""
+    out = tmp_path / "seq"
+    _frames, T_w_c = _write(out, n=3)
+    (out / "meta.json").unlink()
+    (out / "objects.jsonl").unlink()
+    seq = open_sequence(out)
+    assert seq.kind == "sim" and len(seq) == 3 and seq.meta == {}
+    for i in range(3):
+        car_label = next(o for o in seq.gt_objects(i) if o.track_id == 3)
+        car = _objects(i, T_w_c[i])[0]
+        assert car_label.cls == "car" and car_label.dims == pytest.approx(car.dims)
+        assert np.allclose(car_label.T_w_o, car.T_w_o, atol=1e-5)  # labels hold %.6f
+        assert car_label.box2d == car.box2d and car_label.occlusion == car.occlusion
+
+
+def test_meta_image_size_must_match_images(tmp_path):
+    out = tmp_path / "seq"
+    _write(out, n=1)
+    meta = json.loads((out / "meta.json").read_text())
+    meta["image_size"] = [W + 1, H]
+    (out / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError, match=f"{out / 'image_02' / '000000.png'}: image is {W}x{H}"):
+        open_sequence(out)

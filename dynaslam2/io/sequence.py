@@ -419,31 +419,41 @@ def _read_meta(path: Path) -> dict:
 
 
 def _open_sim(path: Path) -> Sequence:
+    """Our layout. depth/ and instances/ are optional (meta.json's with_depth makes depth/ required);
+    poses.txt, times.txt and objects.jsonl count towards the complete frames when present."""
     meta = _read_meta(path / "meta.json") if (path / "meta.json").is_file() else {}
     left_dir = path / "image_02"
     right_dir = _require_dir(path / "image_03", "right images (image_03/)")
     calib_path = path / "calib.txt"
     calib = read_calib(calib_path)
-    with_depth = bool(meta.get("with_depth", (path / "depth").is_dir()))
-    dirs = {"left": left_dir, "right": right_dir, "instances": path / "instances"}
-    if with_depth:
+    dirs = {"left": left_dir, "right": right_dir}
+    if meta.get("with_depth", False):
         dirs["depth"] = _require_dir(path / "depth", "depth images (depth/)")
-    pose_lines = _complete_lines(path / "poses.txt")
-    time_lines = _complete_lines(path / "times.txt")
-    object_lines = _complete_lines(path / "objects.jsonl")
-    counts = [_count_frames(d) for d in dirs.values()] + [len(pose_lines), len(time_lines), len(object_lines)]
-    n = min(counts)
+    elif (path / "depth").is_dir():
+        dirs["depth"] = path / "depth"
+    if (path / "instances").is_dir():
+        dirs["instances"] = path / "instances"
+    logs = {name: _complete_lines(path / name) for name in ("poses.txt", "times.txt", "objects.jsonl")
+            if (path / name).is_file()}
+    n = min([_count_frames(d) for d in dirs.values()] + [len(lines) for lines in logs.values()])
     if n > 0:
         width, height = _stereo_size(left_dir, right_dir, n)
+        if "image_size" in meta and list(meta["image_size"]) != [width, height]:
+            raise InputError(f"{left_dir / _frame_name(0)}: image is {width}x{height} but {path / 'meta.json'} "
+                             f"says {meta['image_size'][0]}x{meta['image_size'][1]}")
     elif "image_size" in meta:
         width, height = (int(v) for v in meta["image_size"])
     else:
         raise InputError(f"{path}: sequence has no complete frame and meta.json gives no image_size")
     camera = stereo_camera_from_calib(calib, width, height, "P2", "P3", source=str(calib_path))
-    gt = poses_from_lines(pose_lines[:n], path / "poses.txt")
-    times = times_from_lines(time_lines[:n], path / "times.txt")
+    gt = poses_from_lines(logs["poses.txt"][:n], path / "poses.txt") if "poses.txt" in logs else None
+    if "times.txt" in logs:
+        times = times_from_lines(logs["times.txt"][:n], path / "times.txt")
+    else:
+        times = np.arange(n) / float(meta.get("fps", 1.0 / KITTI_FRAME_PERIOD_S))
     labels = labels_from_lines(_complete_lines(path / "label_02.txt"), path / "label_02.txt")
-    return Sequence("sim", path, camera, meta, times, gt, dirs, n, True, labels, np.eye(4), object_lines[:n])
+    object_lines = logs["objects.jsonl"][:n] if "objects.jsonl" in logs else None
+    return Sequence("sim", path, camera, meta, times, gt, dirs, n, True, labels, np.eye(4), object_lines)
 
 
 def _open_kitti_odometry(path: Path) -> Sequence:
