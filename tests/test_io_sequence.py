@@ -374,3 +374,33 @@ def test_meta_image_size_must_match_images(tmp_path):
     (out / "meta.json").write_text(json.dumps(meta))
     with pytest.raises(InputError, match=f"{out / 'image_02' / '000000.png'}: image is {W}x{H}"):
         open_sequence(out)
+
+
+def test_atomic_write_keeps_old_file_on_failure(tmp_path, monkeypatch):
+    from dynaslam2.io import atomic
+
+    path = tmp_path / "meta.json"
+    atomic.write_text_atomic(path, "old")
+
+    def failing_replace(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(atomic.os, "replace", failing_replace)
+    with pytest.raises(OSError, match="disk full"):
+        atomic.write_text_atomic(path, "new")
+    assert path.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["meta.json"]  # no temporary file left behind
+
+
+def test_append_log_lines_are_complete(tmp_path):
+    from dynaslam2.io.atomic import AppendLog
+
+    log = AppendLog(tmp_path / "log.txt", fsync=True)
+    log.write_line("a 1")
+    assert (tmp_path / "log.txt").read_text() == "a 1\n"  # flushed before close
+    with pytest.raises(ValueError, match="newline"):
+        log.write_line("b\nc")
+    log.close()
+    with AppendLog(tmp_path / "log.txt", mode="a") as log:
+        log.write_line("d 2")
+    assert (tmp_path / "log.txt").read_text() == "a 1\nd 2\n"

@@ -34,9 +34,9 @@ from dynaslam2.io.kitti import (
     read_poses,
     read_times,
     read_tracking_labels,
-    times_from_lines,
     reference_to_left,
     stereo_camera_from_calib,
+    times_from_lines,
     write_calib,
 )
 from dynaslam2.io.types import FrameData, ObjectState
@@ -140,7 +140,8 @@ class SequenceWriter:
     The output folder must not exist, be empty, or (with `overwrite=True`) hold only a previous
     sequence's files (SEQUENCE_DIRS, SEQUENCE_FILES, preview*): anything else is refused, so
     `--overwrite` never deletes unrelated data. All checks run before anything is written.
-    meta.json carries "complete": false until `close()`.
+    meta.json is `meta` plus format, format_version, image_size [W, H], with_depth, frames and
+    complete (false until `close()`; these keys override same-named keys of `meta`).
     """
 
     def __init__(self, out_dir, camera: StereoCamera, meta: dict, overwrite: bool = False, with_depth: bool = True):
@@ -390,7 +391,7 @@ class Sequence:
         return f"Sequence({self.kind!r}, {str(self.path)!r}, {self._n} frames, {c.width}x{c.height}, B={c.baseline:.3f} m)"
 
 
-def _stereo_size(left_dir: Path, right_dir: Path, n: int) -> tuple[int, int]:
+def _stereo_size(left_dir: Path, right_dir: Path) -> tuple[int, int]:
     """Image size of frame 0, checking that the left and right images agree."""
     left_size = _image_size(left_dir / _frame_name(0))
     right_size = _image_size(right_dir / _frame_name(0))
@@ -437,7 +438,7 @@ def _open_sim(path: Path) -> Sequence:
             if (path / name).is_file()}
     n = min([_count_frames(d) for d in dirs.values()] + [len(lines) for lines in logs.values()])
     if n > 0:
-        width, height = _stereo_size(left_dir, right_dir, n)
+        width, height = _stereo_size(left_dir, right_dir)
         if "image_size" in meta and list(meta["image_size"]) != [width, height]:
             raise InputError(f"{left_dir / _frame_name(0)}: image is {width}x{height} but {path / 'meta.json'} "
                              f"says {meta['image_size'][0]}x{meta['image_size'][1]}")
@@ -466,7 +467,7 @@ def _open_kitti_odometry(path: Path) -> Sequence:
         raise InputError(f"{left_dir}: no images 000000.png, 000001.png, ...")
     if counts[1] == 0:
         raise InputError(f"{right_dir}: no right images 000000.png, 000001.png, ...")
-    width, height = _stereo_size(left_dir, right_dir, min(counts))
+    width, height = _stereo_size(left_dir, right_dir)
     camera = stereo_camera_from_calib(calib, width, height, "P0", "P1", source=str(calib_path))
     meta = {"source": "kitti_odometry", "sequence": path.name}
     times = None
@@ -501,7 +502,7 @@ def _open_kitti_tracking(root: Path, sequence: str) -> Sequence:
     if (root / "instances" / sequence).is_dir():  # KITTI MOTS instance PNGs
         dirs["instances"] = root / "instances" / sequence
     n = min(counts)
-    width, height = _stereo_size(left_dir, right_dir, n)
+    width, height = _stereo_size(left_dir, right_dir)
     camera = stereo_camera_from_calib(calib, width, height, "P2", "P3", source=str(calib_path))
     labels_path = root / "label_02" / f"{sequence}.txt"
     labels = read_tracking_labels(labels_path) if labels_path.is_file() else []
