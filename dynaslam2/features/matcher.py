@@ -26,13 +26,18 @@ def hamming_pairs(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
     return np.bitwise_count(x).sum(axis=1, dtype=np.int32)
 
 
-def hamming_distance(desc_a: np.ndarray, desc_b: np.ndarray, chunk: int = 256) -> np.ndarray:
-    """All-pairs Hamming distances (N,32) x (M,32) uint8 -> (N,M) int32 (xor + popcount on uint64 words)."""
-    a, b = _as_u64(desc_a), _as_u64(desc_b)
-    out = np.empty((len(a), len(b)), np.int32)
-    for s in range(0, len(a), chunk):  # bounded temporaries: chunk x M x 4 words
-        x = np.bitwise_xor(a[s : s + chunk, None, :], b[None, :, :])
-        out[s : s + chunk] = np.bitwise_count(x).sum(axis=2, dtype=np.int32)
+def hamming_distance(desc_a: np.ndarray, desc_b: np.ndarray, chunk: int = 128) -> np.ndarray:
+    """All-pairs Hamming distances (N,32) x (M,32) uint8 -> (N,M) int32: xor + popcount per 64-bit word,
+    accumulated in uint16 over row blocks that stay in cache (~6x faster than one broadcast)."""
+    a = _as_u64(desc_a)
+    b = np.ascontiguousarray(_as_u64(desc_b).T)  # (4, M)
+    out = np.empty((len(a), b.shape[1]), np.int32)
+    for s in range(0, len(a), chunk):
+        blk = a[s : s + chunk]
+        acc = np.bitwise_count(np.bitwise_xor(blk[:, 0:1], b[0])).astype(np.uint16)
+        for k in range(1, 4):
+            acc += np.bitwise_count(np.bitwise_xor(blk[:, k : k + 1], b[k]))
+        out[s : s + chunk] = acc
     return out
 
 
@@ -48,40 +53,54 @@ def rotation_consistent(rot_deg: np.ndarray) -> np.ndarray:
     return np.isin(bins, keep_bins)
 
 
-def _pairs_in_radius(uv_kp: np.ndarray, uv_q: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All (query, keypoint) pairs with |du| < r and |dv| < r (ORB-SLAM2's GetFeaturesInArea square),
-    via a grid bucketing of the keypoints."""
+def _pairs_in_radius(
+    uv_kp: np.ndarray, uv_q: np.ndarray, radius: np.ndarray, kp_octave: np.ndarray | None = None, octave_range: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """All (query, keypoint) pairs with |du| < r and |dv| < r (ORB-SLAM2's GetFeaturesInArea square)
+    and, if given, the keypoint octave within the query's inclusive `octave_range`. Keypoints are
+    bucketed by (grid cell, octave), so each (query, cell) reads one contiguous run of the sorted list."""
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64))
     if len(uv_kp) == 0 or len(uv_q) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return empty
+    n_oct = 1
+    if kp_octave is not None and octave_range is not None:
+        n_oct = int(kp_octave.max()) + 1
+        o_lo = np.clip(octave_range[:, 0], 0, n_oct - 1).astype(np.int64)
+        o_hi = np.clip(octave_range[:, 1], -1, n_oct - 1).astype(np.int64)
+        kp_oct = kp_octave.astype(np.int64)
+    else:
+        o_lo = np.zeros(len(uv_q), np.int64)
+        o_hi = o_lo
+        kp_oct = np.zeros(len(uv_kp), np.int64)
     cell = float(np.clip(np.median(radius), 4.0, 64.0))
     origin = uv_kp.min(axis=0) - 1.0
-    kc = np.floor((uv_kp - origin) / cell).astype(np.int64)
+    kc = ((uv_kp - origin) / cell).astype(np.int64)
     n_cx = int(kc[:, 0].max()) + 1
     n_cy = int(kc[:, 1].max()) + 1
-    key = kc[:, 1] * n_cx + kc[:, 0]
+    key = (kc[:, 1] * n_cx + kc[:, 0]) * n_oct + kp_oct
     kp_order = np.argsort(key, kind="stable")
-    starts = np.searchsorted(key[kp_order], np.arange(n_cx * n_cy + 1))
+    starts = np.searchsorted(key[kp_order], np.arange(n_cx * n_cy * n_oct + 1))
     # Cell ranges of each query square, clipped to the grid.
-    lo = np.floor((uv_q - radius[:, None] - origin) / cell).astype(np.int64)
-    hi = np.floor((uv_q + radius[:, None] - origin) / cell).astype(np.int64)
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, [n_cx - 1, n_cy - 1])
+    lo = np.maximum(np.floor((uv_q - radius[:, None] - origin) / cell).astype(np.int64), 0)
+    hi = np.minimum(np.floor((uv_q + radius[:, None] - origin) / cell).astype(np.int64), [n_cx - 1, n_cy - 1])
     nx = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
     ny = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
-    n_cells = nx * ny
+    n_cells = np.where(o_hi >= o_lo, nx * ny, 0)
     q_of_cell = np.repeat(np.arange(len(uv_q)), n_cells)
     if len(q_of_cell) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return empty
     local = np.arange(len(q_of_cell)) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
-    cx = lo[q_of_cell, 0] + local % nx[q_of_cell]
-    cy = lo[q_of_cell, 1] + local // nx[q_of_cell]
-    cid = cy * n_cx + cx
-    c_start, c_count = starts[cid], starts[cid + 1] - starts[cid]
+    nx_c = nx[q_of_cell]
+    cid = (lo[q_of_cell, 1] + local // nx_c) * n_cx + lo[q_of_cell, 0] + local % nx_c
+    c_start = starts[cid * n_oct + o_lo[q_of_cell]]
+    c_count = starts[cid * n_oct + o_hi[q_of_cell] + 1] - c_start
     q = np.repeat(q_of_cell, c_count)
+    if len(q) == 0:
+        return empty
     offs = np.arange(len(q)) - np.repeat(np.cumsum(c_count) - c_count, c_count)
     k = kp_order[np.repeat(c_start, c_count) + offs]
-    d = np.abs(uv_kp[k] - uv_q[q])
-    inside = (d[:, 0] < radius[q]) & (d[:, 1] < radius[q])
+    r_q = radius[q]
+    inside = (np.abs(uv_kp[k, 0] - uv_q[q, 0]) < r_q) & (np.abs(uv_kp[k, 1] - uv_q[q, 1]) < r_q)
     return q[inside], k[inside]
 
 
@@ -141,14 +160,12 @@ def search_by_projection(
         return result
     uv_proj = np.asarray(uv_proj, np.float64)
     radius = np.broadcast_to(np.asarray(radius, np.float64), (M,))
-    q, k = _pairs_in_radius(kp.uv.astype(np.float64), uv_proj, radius)
+    if octave_range is not None:
+        octave_range = np.asarray(octave_range)
+    q, k = _pairs_in_radius(kp.uv.astype(np.float64), uv_proj, radius, kp.octave, octave_range)
     keep = np.ones(len(q), bool)
     if available is not None:
         keep &= np.asarray(available, bool)[k]
-    if octave_range is not None:
-        octave_range = np.asarray(octave_range)
-        o = kp.octave[k]
-        keep &= (o >= octave_range[q, 0]) & (o <= octave_range[q, 1])
     if u_right_proj is not None and kp_u_right is not None:
         ur_q = np.asarray(u_right_proj, np.float64)[q]
         ur_k = np.asarray(kp_u_right, np.float64)[k]
@@ -185,14 +202,15 @@ def match_descriptors(desc_a: np.ndarray, desc_b: np.ndarray, th: int, nn_ratio:
     rows = np.arange(len(D))
     best = np.argmin(D, axis=1)
     best_d = D[rows, best]
+    col_best = np.argmin(D, axis=0) if mutual else None
     if D.shape[1] > 1:
-        second_d = np.partition(D, 1, axis=1)[:, 1]
-        ok = best_d < nn_ratio * second_d
+        D[rows, best] = np.iinfo(np.int32).max  # second best = min without the best
+        ok = best_d < nn_ratio * D.min(axis=1)
     else:
         ok = np.ones(len(D), bool)
     ok &= best_d <= th
     if mutual:
-        ok &= np.argmin(D, axis=0)[best] == rows
+        ok &= col_best[best] == rows
     match = unique_by_distance(np.where(ok, best, -1), best_d)
     i_a = np.flatnonzero(match >= 0)
     return np.stack([i_a, match[i_a]], axis=1).astype(np.int32)
