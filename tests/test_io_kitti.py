@@ -86,7 +86,7 @@ def test_real_tracking_calibs_parse_with_baseline_from_p2_p3():
         cam01 = stereo_camera_from_calib(calib, 1242, 375, "P0", "P1")
         assert cam01.baseline == pytest.approx(-calib["P1"][0, 3] / calib["P1"][0, 0], rel=1e-12)
         assert cam.fx == calib["P2"][0, 0] and cam.cx == calib["P2"][0, 2] and cam.cy == calib["P2"][1, 2]
-        # cam2 sits ~6 cm right of the reference camera (cam0).
+        # cam2 sits ~6 cm left of the reference camera (cam0): x_cam2 = x_cam0 + (0.06, ., .).
         assert reference_to_left(calib)[0, 3] == pytest.approx(0.06, abs=0.005)
 
 

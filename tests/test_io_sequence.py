@@ -404,3 +404,33 @@ def test_append_log_lines_are_complete(tmp_path):
     with AppendLog(tmp_path / "log.txt", mode="a") as log:
         log.write_line("d 2")
     assert (tmp_path / "log.txt").read_text() == "a 1\nd 2\n"
+
+
+def test_colour_kitti_odometry_moves_gt_to_cam2(tmp_path):
+    """image_2/ + image_3/ with P2/P3 (cam2 6 cm right of cam0): GT re-expressed for cam2, world = cam2 at 0."""
+    root = tmp_path / "sequences" / "07"
+    for cam in ("image_2", "image_3"):
+        (root / cam).mkdir(parents=True)
+        for i in range(3):
+            cv2.imwrite(str(root / cam / f"{i:06d}.png"), np.full((30, 40, 3), (10, 20, 30), np.uint8))
+    t2 = np.array([0.06, 0.0, 0.0])  # P2 = K[I|t2]: x_c2 = x_c0 + t2
+    K = np.array([[50.0, 0, 20], [0, 50, 15], [0, 0, 1]])
+    P2 = np.hstack([K, (K @ t2)[:, None]])
+    P3 = np.hstack([K, (K @ (t2 - [0.5, 0, 0]))[:, None]])
+    (root / "calib.txt").write_text("".join(f"{k}: {' '.join(map(str, P.ravel()))}\n" for k, P in
+                                            (("P0", P2), ("P1", P3), ("P2", P2), ("P3", P3))))
+    T_w_c0 = _poses(3)
+    (tmp_path / "poses").mkdir()
+    np.savetxt(tmp_path / "poses" / "07.txt", T_w_c0[:, :3].reshape(3, 12))
+    seq = open_sequence(root)
+    assert seq.kind == "kitti_odometry" and len(seq) == 3 and seq.meta["cameras"] == ["image_2", "image_3"]
+    assert seq.camera.baseline == pytest.approx(0.5)
+    assert seq[0].left.shape == (30, 40, 3) and tuple(seq[0].left[0, 0]) == (30, 20, 10)  # RGB
+    assert np.allclose(seq.gt_T_w_c[0], np.eye(4), atol=1e-12)
+    T_c2_c0 = np.eye(4)
+    T_c2_c0[:3, 3] = t2
+    # A point fixed in the world seen from cam2 at frame i: x_c2 = T_c2_c0 T_c0_w x_w, for both conventions.
+    X_w0 = np.array([1.0, -2.0, 9.0, 1.0])
+    X_w2 = T_c2_c0 @ X_w0
+    for i in range(3):
+        assert np.allclose(np.linalg.inv(seq.gt_T_w_c[i]) @ X_w2, T_c2_c0 @ np.linalg.inv(T_w_c0[i]) @ X_w0)

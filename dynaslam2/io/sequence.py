@@ -20,6 +20,7 @@ import numpy as np
 from dynaslam2.classes import FROM_KITTI_TYPE
 from dynaslam2.errors import InputError
 from dynaslam2.geometry.camera import StereoCamera
+from dynaslam2.geometry.se3 import inverse
 from dynaslam2.io.atomic import AppendLog, write_png_atomic, write_text_atomic
 from dynaslam2.io.kitti import (
     TrackingLabel,
@@ -458,8 +459,12 @@ def _open_sim(path: Path) -> Sequence:
 
 
 def _open_kitti_odometry(path: Path) -> Sequence:
-    left_dir = path / "image_0"
-    right_dir = _require_dir(path / "image_1", "right images (image_1/)")
+    """KITTI odometry: grey image_0/ + image_1/ with P0/P1, or (without image_0/) colour image_2/ +
+    image_3/ with P2/P3, whose GT poses are moved from cam0 to cam2 (world = cam2 at frame 0)."""
+    grey = (path / "image_0").is_dir()
+    left_name, right_name, P_left, P_right = ("image_0", "image_1", "P0", "P1") if grey else ("image_2", "image_3", "P2", "P3")
+    left_dir = path / left_name
+    right_dir = _require_dir(path / right_name, f"right images ({right_name}/)")
     calib_path = path / "calib.txt"
     calib = read_calib(calib_path)
     counts = [_count_frames(left_dir), _count_frames(right_dir)]
@@ -468,8 +473,8 @@ def _open_kitti_odometry(path: Path) -> Sequence:
     if counts[1] == 0:
         raise InputError(f"{right_dir}: no right images 000000.png, 000001.png, ...")
     width, height = _stereo_size(left_dir, right_dir)
-    camera = stereo_camera_from_calib(calib, width, height, "P0", "P1", source=str(calib_path))
-    meta = {"source": "kitti_odometry", "sequence": path.name}
+    camera = stereo_camera_from_calib(calib, width, height, P_left, P_right, source=str(calib_path))
+    meta = {"source": "kitti_odometry", "sequence": path.name, "cameras": [left_name, right_name]}
     times = None
     if (path / "times.txt").is_file():
         times = read_times(path / "times.txt")
@@ -477,7 +482,10 @@ def _open_kitti_odometry(path: Path) -> Sequence:
     gt = None
     for poses_path in (path / "poses.txt", path.parent.parent / "poses" / f"{path.name}.txt"):
         if poses_path.is_file():
-            gt = read_poses(poses_path)
+            gt = read_poses(poses_path)  # T_w_c0, world = cam0 at frame 0
+            if not grey:
+                T_c2_c0 = reference_to_left(calib, P_left)
+                gt = T_c2_c0 @ gt @ inverse(T_c2_c0)
             counts.append(len(gt))
             meta["poses"] = str(poses_path)
             break
@@ -486,8 +494,8 @@ def _open_kitti_odometry(path: Path) -> Sequence:
         times = np.arange(n) * KITTI_FRAME_PERIOD_S
         meta["timestamps"] = f"none on disk; {1 / KITTI_FRAME_PERIOD_S:g} Hz assumed"
     dirs = {"left": left_dir, "right": right_dir}
-    grey = cv2.imread(str(left_dir / _frame_name(0)), cv2.IMREAD_UNCHANGED).ndim == 2
-    return Sequence("kitti_odometry", path, camera, meta, times, gt, dirs, n, not grey, [], np.eye(4))
+    color = cv2.imread(str(left_dir / _frame_name(0)), cv2.IMREAD_UNCHANGED).ndim == 3
+    return Sequence("kitti_odometry", path, camera, meta, times, gt, dirs, n, color, [], np.eye(4))
 
 
 def _open_kitti_tracking(root: Path, sequence: str) -> Sequence:
@@ -515,8 +523,9 @@ def _open_kitti_tracking(root: Path, sequence: str) -> Sequence:
 
 def open_sequence(path, sequence: str | None = None) -> Sequence:
     """Open a sequence folder: ours (image_02/ + meta.json or label_02.txt), KITTI odometry
-    (image_0/, image_1/, calib.txt[, times.txt, poses.txt]) or KITTI tracking (ROOT with
-    image_02/NNNN/ and `sequence="NNNN"`, or a path pointing at ROOT/image_02/NNNN)."""
+    (image_0/ + image_1/ or image_2/ + image_3/, calib.txt[, times.txt, poses.txt or ../../poses/NN.txt])
+    or KITTI tracking (ROOT with image_02/NNNN/ and `sequence="NNNN"`, or a path pointing at
+    ROOT/image_02/NNNN; calib/NNNN.txt, optional label_02/NNNN.txt and MOTS instances/NNNN/)."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: sequence folder not found")
@@ -528,7 +537,7 @@ def open_sequence(path, sequence: str | None = None) -> Sequence:
         return _open_kitti_tracking(path, sequence)
     if (path / "image_02").is_dir() and ((path / "meta.json").is_file() or (path / "label_02.txt").is_file()):
         return _open_sim(path)
-    if (path / "image_0").is_dir():
+    if (path / "image_0").is_dir() or (path / "image_2").is_dir() and (path / "calib.txt").is_file():
         return _open_kitti_odometry(path)
     if (path / "image_02").is_dir() and any(p.is_dir() for p in (path / "image_02").iterdir()):
         found = sorted(p.name for p in (path / "image_02").iterdir() if p.is_dir())
