@@ -28,6 +28,7 @@ class ORBConfig:
     edge_threshold: int = 19
     patch_size: int = 31
     cell_size: int = 30
+    threads: int = 2  # extract_pair: the right image in a worker thread when > 1
 
     def validate(self) -> None:
         if self.n_features <= 0:
@@ -36,6 +37,13 @@ class ORBConfig:
             raise ConfigError(f"orb.n_levels: expected >= 1, got {self.n_levels}")
         if not self.scale_factor > 1.0:
             raise ConfigError(f"orb.scale_factor: expected > 1, got {self.scale_factor}")
+        if not 0 < self.min_th_fast <= self.ini_th_fast:
+            raise ConfigError(f"orb: expected 0 < min_th_fast <= ini_th_fast, got {self.min_th_fast}, {self.ini_th_fast}")
+        if self.edge_threshold < 19 or self.patch_size != 31:
+            raise ConfigError(f"orb: the rBRIEF pattern needs patch_size 31 and edge_threshold >= 19, "
+                              f"got {self.patch_size}, {self.edge_threshold}")
+        if self.cell_size < 8 or self.threads < 1:
+            raise ConfigError(f"orb: expected cell_size >= 8 and threads >= 1, got {self.cell_size}, {self.threads}")
 
 
 @dataclass
@@ -51,14 +59,15 @@ class StereoConfig:
     max_subpixel_delta: float = 1.0  # parabola vertex further than this from the best SAD offset: rejected
     outlier_sad_factor: float = 1.5 * 1.4  # reject matches with SAD > factor * median SAD
     th_depth_baselines: float = 40.0
+    right_features_factor: float = 1.0  # right-image ORB budget = factor x orb.n_features (more: more depths)
 
     def validate(self) -> None:
         if not 0 < self.th_low <= self.th_high <= 256:
             raise ConfigError(f"stereo: expected 0 < th_low <= th_high <= 256, got {self.th_low}, {self.th_high}")
         if self.sad_window < 1 or self.sad_search < 1:
             raise ConfigError(f"stereo: sad_window and sad_search must be >= 1, got {self.sad_window}, {self.sad_search}")
-        if not self.row_band_scale > 0 or not self.outlier_sad_factor > 0:
-            raise ConfigError("stereo: row_band_scale and outlier_sad_factor must be positive")
+        if not (self.row_band_scale > 0 and self.outlier_sad_factor > 0 and self.right_features_factor > 0):
+            raise ConfigError("stereo: row_band_scale, outlier_sad_factor and right_features_factor must be positive")
 
 
 @dataclass

@@ -97,6 +97,20 @@ def test_extraction_deterministic(kitti_left, extractor):
         np.testing.assert_array_equal(getattr(kp, name), getattr(kp2, name))
 
 
+def test_extract_pair_threads_and_budget_override(kitti_left):
+    img, pyr, kp = kitti_left
+    pyr_r = ORBExtractor(ORBConfig()).build_pyramid(_kitti("image_1"))
+    seq = ORBExtractor(ORBConfig(threads=1)).extract_pair(pyr, pyr_r, n_features_right=3000)
+    par = ORBExtractor(ORBConfig(threads=2)).extract_pair(pyr, pyr_r, n_features_right=3000)
+    for a, b in zip(seq, par):
+        np.testing.assert_array_equal(a.uv, b.uv)
+        np.testing.assert_array_equal(a.desc, b.desc)
+    np.testing.assert_array_equal(seq[0].desc, kp.desc)
+    assert 0.95 * 3000 <= len(seq[1]) <= 3000
+    with pytest.raises(InputError):
+        ORBExtractor(ORBConfig()).extract(pyr, n_features=0)
+
+
 def test_extraction_mask_drops_and_reallocates(kitti_left, extractor):
     img, pyr, kp = kitti_left
     mask = np.ones(img.shape, bool)

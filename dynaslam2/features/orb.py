@@ -11,6 +11,7 @@ blur as ORB-SLAM2). OpenCV 5.0 keeps the angle of provided keypoints (checked in
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -148,6 +149,7 @@ class ORBExtractor:
         self.level_budgets = level_budgets(cfg.n_features, cfg.n_levels, cfg.scale_factor)
         self._w_u, self._w_v = _ic_kernels()
         self._fast = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
+        self._worker: tuple[ThreadPoolExecutor, ORBExtractor] | None = None  # lazily, for extract_pair
         self._orb = cv2.ORB_create(
             nfeatures=1, nlevels=1, edgeThreshold=cfg.edge_threshold, patchSize=cfg.patch_size, fastThreshold=cfg.min_th_fast
         )
@@ -165,9 +167,10 @@ class ORBExtractor:
             pyramid.append(cv2.resize(pyramid[-1], size, interpolation=cv2.INTER_LINEAR))
         return pyramid
 
-    def extract(self, pyramid: list[np.ndarray], mask: np.ndarray | None = None) -> Keypoints:
+    def extract(self, pyramid: list[np.ndarray], mask: np.ndarray | None = None, n_features: int | None = None) -> Keypoints:
         """Distributed ORB keypoints of all levels. `mask` (HxW bool/uint8 at level 0, True/non-zero = usable)
-        removes candidates before the distribution, so the budget goes to the usable area."""
+        removes candidates before the distribution, so the budget goes to the usable area. `n_features`
+        overrides the configured budget (e.g. more features on the right image of a stereo pair)."""
         if len(pyramid) != self.n_levels:
             raise InputError(f"pyramid: expected {self.n_levels} levels, got {len(pyramid)}")
         if mask is not None:
@@ -175,8 +178,27 @@ class ORBExtractor:
             if mask.shape != pyramid[0].shape:
                 raise InputError(f"mask: expected shape {pyramid[0].shape}, got {mask.shape}")
             mask = mask.astype(bool, copy=False)
-        parts = [self._extract_level(level, pyramid[level], mask) for level in range(self.n_levels)]
+        budgets = self.level_budgets
+        if n_features is not None:
+            if n_features <= 0:
+                raise InputError(f"n_features: expected a positive integer, got {n_features}")
+            budgets = level_budgets(int(n_features), self.n_levels, self.cfg.scale_factor)
+        parts = [self._extract_level(level, pyramid[level], mask, int(budgets[level])) for level in range(self.n_levels)]
         return Keypoints.concatenate([p for p in parts if p is not None])
+
+    def extract_pair(
+        self, pyr_left: list[np.ndarray], pyr_right: list[np.ndarray], mask_left: np.ndarray | None = None, n_features_right: int | None = None
+    ) -> tuple[Keypoints, Keypoints]:
+        """`extract` on both images of a stereo pair (same result). With cfg.threads > 1 the right image
+        runs in a worker thread: OpenCV and the large numpy operations release the GIL."""
+        if self.cfg.threads <= 1:
+            return self.extract(pyr_left, mask_left), self.extract(pyr_right, None, n_features_right)
+        if self._worker is None:
+            self._worker = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="orb-right"), ORBExtractor(self.cfg))
+        pool, twin = self._worker
+        right = pool.submit(twin.extract, pyr_right, None, n_features_right)
+        left = self.extract(pyr_left, mask_left)
+        return left, right.result()
 
     def _detect(self, level: int, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """FAST candidates (integer xy at this level, score) by ORB-SLAM2's per-cell rule: a cell keeps its
@@ -238,8 +260,7 @@ class ORBExtractor:
         idx = np.fromiter((k.class_id for k in kps_out), np.int64, len(kps_out))
         return idx, desc
 
-    def _extract_level(self, level: int, img: np.ndarray, mask: np.ndarray | None) -> Keypoints | None:
-        budget = int(self.level_budgets[level])
+    def _extract_level(self, level: int, img: np.ndarray, mask: np.ndarray | None, budget: int) -> Keypoints | None:
         if budget <= 0:
             return None
         xy, resp = self._detect(level, img, mask)
