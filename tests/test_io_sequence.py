@@ -434,3 +434,14 @@ def test_colour_kitti_odometry_moves_gt_to_cam2(tmp_path):
     X_w2 = T_c2_c0 @ X_w0
     for i in range(3):
         assert np.allclose(np.linalg.inv(seq.gt_T_w_c[i]) @ X_w2, T_c2_c0 @ np.linalg.inv(T_w_c0[i]) @ X_w0)
+
+
+def test_corrupt_object_record_is_an_input_error(tmp_path):
+    out = tmp_path / "seq"
+    _write(out, n=2)
+    lines = (out / "objects.jsonl").read_text().splitlines(keepends=True)
+    (out / "objects.jsonl").write_text(lines[0] + '{"frame": 1, "objects": [{"track_id": 1}]}\n')
+    seq = open_sequence(out)
+    assert len(seq.gt_objects(0)) == 2
+    with pytest.raises(InputError, match=r"objects.jsonl, line 2: invalid object record"):
+        seq.gt_objects(1)

@@ -370,8 +370,11 @@ class Sequence:
         if not 0 <= i < self._n:
             raise IndexError(f"frame {i} out of range for a sequence of {self._n} frames")
         if self._object_records is not None:
-            record = json.loads(self._object_records[i])
-            return [_object_from_record(r) for r in record["objects"]]
+            try:
+                record = json.loads(self._object_records[i])
+                return [_object_from_record(r) for r in record["objects"]]
+            except (ValueError, KeyError, TypeError) as e:
+                raise InputError(f"{self.path / 'objects.jsonl'}, line {i + 1}: invalid object record ({e!r})") from None
         T_w_c = self.gt_T_w_c[i] if self.gt_T_w_c is not None else np.eye(4)
         T_w_ref = T_w_c @ self._T_left_ref
         objects = []
