@@ -103,8 +103,9 @@ def write_calib(path, camera: StereoCamera) -> None:
     """KITTI tracking calib for a rectified rig whose reference frame is the left camera.
 
     P0 = P2 = K[I|0], P1 = P3 = K[I|(-fx*B, 0, 0)], R0_rect = I, Tr_velo_to_cam = a virtual LiDAR at the
-    left camera with LiDAR axes (x forward, y left, z up), Tr_imu_to_velo = I. Names and colons as in
-    the official KITTI tracking files, so KITTI tools read it.
+    left camera with LiDAR axes (x forward, y left, z up), Tr_imu_to_velo = I. Every line is
+    `NAME: numbers`, names as in the real KITTI tracking calib files under shared/data, so loaders
+    that split on ':' read it (read_calib also accepts the colon-less R_rect/Tr_velo_cam variant).
     """
     P_left, P_right = camera.projection_matrices()
     R_cam_velo = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
