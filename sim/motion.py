@@ -269,9 +269,6 @@ class StreetLayout:
     x_int: float | None  # x of the crossing street (intersection layout) or None
     cross_half: float  # half width of the crossing street road
 
-    def ego_lane_y(self) -> float:
-        return -0.5 * self.lane_width
-
     def lane_y(self, index: int, oncoming: bool) -> float:
         """Lane centre; index 0 is the lane next to the centre line; oncoming lanes are at y > 0."""
         y = (index + 0.5) * self.lane_width
@@ -327,6 +324,17 @@ def _ego_profile(cfg, rng: np.random.Generator, duration: float) -> SpeedProfile
     return SpeedProfile.of(knots)
 
 
+def _ego_path(cfg, rng: np.random.Generator, y0: float) -> Path:
+    """Straight along +x; on the plain street with 2+ lanes, a lane change to the right and back."""
+    if cfg.layout != "street" or cfg.lanes_per_direction < 2 or not cfg.ego_lane_change:
+        return Path.build(0.0, y0, 0.0, [("straight", 1.0)])
+    v, duration = max(cfg.ego_speed, 1.0), cfg.duration
+    return Path.build(0.0, y0, 0.0, [("straight", v * duration * rng.uniform(0.1, 0.3)),
+                                     ("shift", rng.uniform(35.0, 50.0), -cfg.lane_width),
+                                     ("straight", v * duration * rng.uniform(0.15, 0.3)),
+                                     ("shift", rng.uniform(35.0, 50.0), cfg.lane_width), ("straight", 1.0)])
+
+
 def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
     """Ego route, actors with collision-free trajectories and kerbside props for `cfg`."""
     rng_ego, rng_park, rng_move, rng_ped, rng_prop = [np.random.default_rng(s) for s in seed_seq.spawn(5)]
@@ -334,7 +342,7 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
     lw, n_l = cfg.lane_width, cfg.lanes_per_direction
     ego_speed = _ego_profile(cfg, rng_ego, duration)
     ego_y = -0.5 * lw
-    ego = Trajectory(Path.build(0.0, ego_y, 0.0, [("straight", 1.0)]), ego_speed)
+    ego = Trajectory(_ego_path(cfg, rng_ego, ego_y), ego_speed)
     ego_end = float(ego.arc(duration))
     half_road = n_l * lw
     kerb = half_road + cfg.parking_width
@@ -483,18 +491,21 @@ def _plan_followers(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Tr
     n_lane = n if cfg.lanes_per_direction == 1 else min(2, n)
     ahead = [ego]
     front = EGO_DIMS[0]
+    lead_is_ego = [True]
     for _ in range(n_lane):
         def make():
             cls = _moving_class(rng)
             dims = _dims(rng, cls)
-            gap = 0.5 * (front + dims[0]) + rng.uniform(6.0, 14.0)
+            clearance = EGO_CLEARANCE + 0.5 if lead_is_ego[0] else 0.0
+            gap = 0.5 * (front + dims[0]) + clearance + rng.uniform(2.0, 6.0)
             lead = ahead[-1]
             return cls, dims, Trajectory(lead.path, ego.speed.scaled(max(k, 1.0)), lead.s0 + gap,
-                                         lead.tau - rng.uniform(0.5, 1.2))
+                                         lead.tau - rng.uniform(0.3, 0.8))
         added = try_add(make)
         if added is not None:
             ahead.append(added.trajectory)
             front = added.dims[0]
+            lead_is_ego[0] = False
     if cfg.lanes_per_direction == 1:
         return
     y = layout.lane_y(1, False)

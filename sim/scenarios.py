@@ -43,6 +43,7 @@ class ScenarioConfig:
     znear: float = 0.1  # m, near clipping distance
     zfar: float = 400.0  # m, far clipping distance
     ego_speed: float = 8.0  # m/s nominal
+    ego_lane_change: bool = True  # street layout with 2+ lanes: the ego changes lane and back
     n_vehicles: int = 16
     n_pedestrians: int = 6
     parked_fraction: float = 0.35

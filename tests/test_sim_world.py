@@ -1,0 +1,211 @@
+"""The simulated street world: scenario loading, building, motion, determinism, camera model."""
+
+import os
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+mujoco = pytest.importorskip("mujoco")
+
+from dynaslam2.errors import ConfigError, InputError  # noqa: E402
+from sim.scenarios import SCENARIOS, load_scenario  # noqa: E402
+from sim.world import build_world, camera_intrinsics  # noqa: E402
+
+SMALL = ["frames=12", "image_size=96x64", "texture_px=64", "view_ahead=60"]
+
+
+@pytest.fixture(scope="module")
+def traffic():
+    return build_world(load_scenario("traffic", SMALL))
+
+
+def test_load_builtins_overrides_and_yaml(tmp_path):
+    cfg = load_scenario("traffic", ["seed=3", "frames=20", "image_size=640x480", "object_speed=1.5"])
+    assert (cfg.name, cfg.seed, cfg.frames, cfg.image_size, cfg.object_speed) == ("traffic", 3, 20, (640, 480), 1.5)
+    assert load_scenario("static", []).parked_fraction == 1.0
+    assert SCENARIOS == ("static", "traffic", "crossing", "following")
+    path = tmp_path / "mine.yaml"
+    path.write_text("base: crossing\nseed: 7\nocclusion: 0.9\n")
+    cfg = load_scenario(str(path), ["frames=5"])
+    assert (cfg.name, cfg.layout, cfg.seed, cfg.occlusion, cfg.frames) == ("mine", "intersection", 7, 0.9, 5)
+
+
+def test_bad_scenario_input():
+    with pytest.raises(InputError, match="static, traffic, crossing, following"):
+        load_scenario("motorway", [])
+    with pytest.raises(ConfigError, match="warp_speed"):
+        load_scenario("traffic", ["warp_speed=3"])
+    with pytest.raises(ConfigError, match="occlusion"):
+        load_scenario("traffic", ["occlusion=1.5"])
+    with pytest.raises(ConfigError, match="texture"):
+        load_scenario("traffic", ["texture=shiny"])
+    with pytest.raises(ConfigError, match="image_size"):
+        load_scenario("traffic", ["image_size=640"])
+    with pytest.raises(ConfigError, match="frames"):
+        load_scenario("traffic", ["frames=0"])
+
+
+def _geom_extent_in_body(model, body_id):
+    """(lo, hi) corners of the union of the geoms' boxes of one body, in the body frame."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for g in np.flatnonzero(model.geom_bodyid == body_id):
+        c, h = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, model.geom_quat[g])
+        corners = (np.array(np.meshgrid(*[[-1, 1]] * 3)).reshape(3, -1).T * h + c) @ R.reshape(3, 3).T
+        corners += model.geom_pos[g]
+        lo, hi = np.minimum(lo, corners.min(0)), np.maximum(hi, corners.max(0))
+    return lo, hi
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_every_builtin_builds_with_tight_boxes(name):
+    world = build_world(load_scenario(name, SMALL))
+    m = world.model
+    assert len(world.actors) > 0
+    assert [a.track_id for a in world.actors] == list(range(1, len(world.actors) + 1))
+    assert np.all(m.geom_contype == 0) and np.all(m.geom_conaffinity == 0)
+    assert not np.any(m.light_castshadow)
+    assert m.vis.global_.offwidth >= 96 and m.vis.global_.offheight >= 64
+    assert m.cam("left").id >= 0 and m.cam("right").id >= 0
+    for a in world.actors:
+        assert m.body_mocapid[a.body_id] >= 0 and m.body_rootid[a.body_id] == a.body_id
+        lo, hi = _geom_extent_in_body(m, a.body_id)
+        half = np.array(a.dims) / 2
+        np.testing.assert_allclose(lo, -half, atol=1e-6, err_msg=f"{name} {a.cls} {a.track_id}")
+        np.testing.assert_allclose(hi, half, atol=1e-6, err_msg=f"{name} {a.cls} {a.track_id}")
+    classes = {a.cls for a in world.actors}
+    assert "car" in classes
+    if name == "static":
+        assert all(a.parked for a in world.actors)
+    else:
+        assert not all(a.parked for a in world.actors)
+
+
+def test_set_time_moves_actors_and_matches_states(traffic):
+    w = traffic
+    states0 = w.actor_states(0.0)
+    states1 = w.actor_states(1.0)
+    moving = [i for i, a in enumerate(w.actors) if not a.parked]
+    assert moving
+    for i in moving:
+        assert np.linalg.norm(states1[i][0][:3, 3] - states0[i][0][:3, 3]) > 0.05
+    w.set_time(1.0)
+    for a, (T_m_o, _, _) in zip(w.actors, states1):
+        mid = w.model.body_mocapid[a.body_id]
+        np.testing.assert_allclose(w.data.mocap_pos[mid], T_m_o[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(w.data.xmat[a.body_id].reshape(3, 3), T_m_o[:3, :3], atol=1e-9)
+    # velocities are the time derivative of the poses (also between frames)
+    t, h = 0.55, 1e-3
+    sa, sb, s0 = w.actor_states(t + h), w.actor_states(t - h), w.actor_states(t)
+    for i in moving:
+        v_fd = (sa[i][0][:3, 3] - sb[i][0][:3, 3]) / (2 * h)
+        np.testing.assert_allclose(s0[i][1], v_fd, atol=1e-4)
+
+
+def test_ego_camera_pose_matches_mujoco(traffic):
+    w = traffic
+    for t in (0.0, 0.7, 1.1):
+        w.set_time(t)
+        T_m_c = w.ego_T_m_c(t)
+        cid = w.model.cam("left").id
+        np.testing.assert_allclose(T_m_c[:3, 3], w.data.cam_xpos[cid], atol=1e-9)
+        np.testing.assert_allclose(T_m_c[:3, :3], w.data.cam_xmat[cid].reshape(3, 3) @ np.diag([1, -1, -1]),
+                                   atol=1e-9)
+        rid = w.model.cam("right").id
+        right_in_left = T_m_c[:3, :3].T @ (w.data.cam_xpos[rid] - T_m_c[:3, 3])
+        np.testing.assert_allclose(right_in_left, [w.cfg.baseline, 0, 0], atol=1e-9)
+    assert w.ego_T_m_c(1.1)[0, 3] > w.ego_T_m_c(0.0)[0, 3] + 5.0  # drives forward at ~8 m/s
+
+
+def _poses(world, t):
+    return np.array([T for T, _, _ in world.actor_states(t)])
+
+
+def test_determinism_and_seed():
+    cfg = ["frames=5", "image_size=64x48", "texture_px=32", "view_ahead=40"]
+    a = build_world(load_scenario("traffic", cfg + ["seed=4"]))
+    b = build_world(load_scenario("traffic", cfg + ["seed=4"]))
+    c = build_world(load_scenario("traffic", cfg + ["seed=5"]))
+    assert [x.cls for x in a.actors] == [x.cls for x in b.actors]
+    np.testing.assert_array_equal(_poses(a, 0.3), _poses(b, 0.3))
+    np.testing.assert_array_equal(a.model.tex_data, b.model.tex_data)
+    np.testing.assert_array_equal(a.model.geom_pos, b.model.geom_pos)
+    assert a.model.tex_data.shape != c.model.tex_data.shape or np.any(a.model.tex_data != c.model.tex_data)
+    pa, pc = _poses(a, 0.3), _poses(c, 0.3)
+    assert pa.shape != pc.shape or not np.allclose(pa, pc)
+
+
+def test_static_scenario_has_zero_velocities():
+    w = build_world(load_scenario("static", SMALL))
+    for t in (0.0, 0.5, 1.1):
+        for _, v, om in w.actor_states(t):
+            assert np.all(v == 0) and np.all(om == 0)
+    assert w.ego_T_m_c(1.1)[0, 3] > w.ego_T_m_c(0.0)[0, 3] + 5.0
+
+
+def _mean_speed(world):
+    speeds = [np.linalg.norm(v) for k in range(world.cfg.frames)
+              for (_, v, _), a in zip(world.actor_states(k / world.cfg.fps), world.actors) if not a.parked]
+    return float(np.mean(speeds))
+
+
+@pytest.mark.parametrize("name", ["traffic", "crossing"])
+def test_object_speed_raises_speeds(name):
+    slow = build_world(load_scenario(name, SMALL + ["object_speed=0.7", "frames=30"]))
+    fast = build_world(load_scenario(name, SMALL + ["object_speed=1.6", "frames=30"]))
+    assert _mean_speed(fast) > 1.5 * _mean_speed(slow)
+
+
+def test_intrinsics_rule_from_rendered_depth():
+    """fx = fy = (H/2)/tan(fovy/2), cx = (W-1)/2, cy = (H-1)/2: fitted from rendered metric depth of the
+    road plane (z = 0, gives fy and cy) and of street-facing facades (planes y = const, give fx and cx)."""
+    cfg = load_scenario("static", ["frames=1", "image_size=160x120", "texture_px=32", "view_ahead=40",
+                                   "n_vehicles=0", "n_pedestrians=0", "occlusion=0"])
+    w = build_world(cfg)
+    fx, fy, cx, cy = camera_intrinsics(cfg)
+    W, H = cfg.image_size
+    assert fx == fy == pytest.approx((H / 2) / np.tan(np.radians(cfg.fovy_deg) / 2))
+    assert (cx, cy) == ((W - 1) / 2, (H - 1) / 2)
+    w.set_time(0.0)
+    r = mujoco.Renderer(w.model, H, W)
+    r.update_scene(w.data, "left")
+    r.enable_depth_rendering()
+    depth = r.render().astype(np.float64)
+    r.disable_depth_rendering()
+    r.enable_segmentation_rendering()
+    seg = r.render()[..., 0]
+    r.close()
+    m = w.model
+    v, u = np.mgrid[0:H, 0:W]
+    T_m_c = w.ego_T_m_c(0.0)
+    road = np.isin(seg, np.flatnonzero((m.geom_size[:, 2] == 0.05) & (m.geom_pos[:, 2] == -0.05)))
+    road &= depth < 60
+    assert road.sum() > 200
+    # road plane: v = cy + fy * cam_height / Z
+    A = np.column_stack([np.ones(road.sum()), cfg.cam_height / depth[road]])
+    cy_fit, fy_fit = np.linalg.lstsq(A, v[road], rcond=None)[0]
+    assert abs(cy_fit - cy) < 0.1 and abs(fy_fit / fy - 1) < 1e-3
+    # facades on the right side: plane y_m = y_face, in the camera X_c = -(y_face - y_cam) = d
+    fac = np.flatnonzero((m.geom_bodyid == 0) & (m.geom_size[:, 2] > 2.5) & (m.geom_pos[:, 1] < 0))
+    us, zs, ds = [], [], []
+    for g in fac:
+        mask = (seg == g) & (depth < 80)
+        y_face = m.geom_pos[g, 1] + m.geom_size[g, 1]
+        d = T_m_c[1, 3] - y_face  # metres to the right of the camera
+        X = (u[mask] - cx) * depth[mask] / fx  # nominal backprojection, only to select the street face
+        keep = np.abs(X - d) < 0.3
+        us.append(u[mask][keep]), zs.append(depth[mask][keep]), ds.append(np.full(keep.sum(), d))
+    us, zs, ds = map(np.concatenate, (us, zs, ds))
+    assert len(us) > 200
+    A = np.column_stack([np.ones(len(us)), ds / zs])
+    cx_fit, fx_fit = np.linalg.lstsq(A, us, rcond=None)[0]
+    assert abs(cx_fit - cx) < 0.1 and abs(fx_fit / fx - 1) < 1e-3
+
+
+def test_fx_overrides_fovy():
+    cfg = load_scenario("traffic", ["image_size=1242x375", "fx=718.856"])
+    fx, fy, cx, cy = camera_intrinsics(cfg)
+    assert fx == pytest.approx(718.856) and fy == pytest.approx(718.856)
+    assert (cx, cy) == (620.5, 187.0)
