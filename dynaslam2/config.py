@@ -185,12 +185,17 @@ class OptimConfig:
     pose_robust_rounds: int = 3  # rounds with the Huber kernel; the later ones run without it
     pose_min_points: int = 3  # fewer correspondences: the pose is returned unchanged, no inlier
     pose_min_inliers: int = 10  # stop the rounds when fewer inliers remain
+    pose_restart_rounds: bool = False  # True: every round restarts from the initial pose (ORB-SLAM2); False: warm
     ba_iterations_robust: int = 5  # LM iterations with Huber before the outlier removal
     ba_iterations_refine: int = 10  # LM iterations without the outliers and without kernel
     min_depth: float = 1e-3  # observations of points closer than this (or behind) are outliers
     relative_error_tol: float = 1e-5  # LM stops early when the relative cost decrease is below this
+    lambda_initial: float = 1e-3  # LM damping: lambda * diag(H) (Marquardt) when diagonal_damping, else lambda * I
+    diagonal_damping: bool = True
     linear_solver: Literal["MULTIFRONTAL_CHOLESKY", "MULTIFRONTAL_QR", "SEQUENTIAL_CHOLESKY"] = "MULTIFRONTAL_CHOLESKY"
-    ordering: Literal["COLAMD", "METIS"] = "COLAMD"
+    # BA elimination order: SCHUR = all points, then the keyframes (the Schur complement, known from the
+    # problem's structure at no cost); COLAMD / METIS = gtsam's fill-reducing orderings computed on the graph.
+    ordering: Literal["SCHUR", "COLAMD", "METIS"] = "SCHUR"
 
     def validate(self) -> None:
         if not (self.chi2_mono > 0 and self.chi2_stereo > 0):
@@ -204,6 +209,8 @@ class OptimConfig:
             raise ConfigError("optim.ba_iterations_robust/ba_iterations_refine: expected >= 0")
         if not self.relative_error_tol >= 0:
             raise ConfigError(f"optim.relative_error_tol: expected >= 0, got {self.relative_error_tol}")
+        if not self.lambda_initial > 0:
+            raise ConfigError(f"optim.lambda_initial: expected > 0, got {self.lambda_initial}")
 
 
 @dataclass

@@ -80,7 +80,7 @@ def test_pose_only_bad_input():
 def test_pose_only_factor_jacobian_and_huber():
     X_w, obs, T_init = pose_problem(5, 40, 0.5, 0.3)
     values = gtsam.Values()
-    values.insert(0, pose3_from_matrix(T_init))
+    values.insert(0, pose3_from_matrix(inverse(T_init)))
     plain = pose_only_factor(0, X_w, obs.meas, obs.inv_sigma2, None, CAMERA, 1e-3)
     A, b = plain.linearize(values).jacobian()
     e0 = plain.unwhitenedError(values)

@@ -44,13 +44,20 @@ def _robust(model: gtsam.noiseModel.Base, delta: float | None) -> gtsam.noiseMod
     return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(delta), model)
 
 
-def lm_params(cfg: OptimConfig, max_iterations: int) -> gtsam.LevenbergMarquardtParams:
-    """Levenberg-Marquardt settings from the config (solver, ordering, early stop)."""
+def lm_params(cfg: OptimConfig, max_iterations: int, ordering_keys: np.ndarray | None = None
+              ) -> gtsam.LevenbergMarquardtParams:
+    """Levenberg-Marquardt settings from the config; `ordering_keys` (elimination order) is used when
+    `cfg.ordering == "SCHUR"`, else gtsam computes COLAMD / METIS on the graph."""
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(max_iterations)
     params.setLinearSolverType(cfg.linear_solver)
-    params.setOrderingType(cfg.ordering)
+    if cfg.ordering == "SCHUR" and ordering_keys is not None:
+        params.setOrdering(gtsam.Ordering(ordering_keys.tolist()))
+    else:
+        params.setOrderingType("METIS" if cfg.ordering == "METIS" else "COLAMD")
     params.setRelativeErrorTol(cfg.relative_error_tol)
+    params.setlambdaInitial(cfg.lambda_initial)
+    params.setDiagonalDamping(cfg.diagonal_damping)
     return params
 
 

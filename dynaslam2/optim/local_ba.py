@@ -6,7 +6,8 @@ The problem is plain arrays (`BAProblem`); gtsam stays inside. Keyframe `k` is t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
@@ -56,6 +57,7 @@ class BAResult:
     iterations: int
     initial_error: float
     final_error: float
+    timings_ms: dict[str, float] = field(default_factory=dict)  # "build" (graph, values, ordering), "solve" (LM)
 
 
 def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: OptimConfig) -> BAResult:
@@ -76,13 +78,14 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
     initial_chi2, initial_depth = _chi2_depth(problem, T_c_w, X_w, camera)
     use = np.ones(len(problem.obs_kf), dtype=bool)
     iterations = 0
+    timings_ms = {"build": 0.0, "solve": 0.0}
     for robust, n_iter in ((True, cfg.ba_iterations_robust), (False, cfg.ba_iterations_refine)):
         if not robust:
             c2, depth = _chi2_depth(problem, T_c_w, X_w, camera)
             use = (c2 <= th) & (depth > cfg.min_depth)
         if n_iter == 0 or not use.any():
             continue
-        T_c_w, X_w, n = _optimize(problem, use, fixed, T_c_w, X_w, robust, n_iter, camera, cfg)
+        T_c_w, X_w, n = _optimize(problem, use, fixed, T_c_w, X_w, robust, n_iter, camera, cfg, timings_ms)
         iterations += n
     final_chi2, final_depth = _chi2_depth(problem, T_c_w, X_w, camera)
     T_c_w[fixed] = problem.T_c_w[fixed]
@@ -93,6 +96,7 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
         iterations=iterations,
         initial_error=float(huber_cost(initial_chi2, th).sum()),
         final_error=float(huber_cost(final_chi2, th).sum()),
+        timings_ms=timings_ms,
     )
 
 
@@ -106,8 +110,11 @@ def _optimize(
     n_iter: int,
     camera: StereoCamera,
     cfg: OptimConfig,
+    timings_ms: dict[str, float],
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """One LM run on the observations `use` (Huber if `robust`); returns the updated (T_c_w, X_w, iterations)."""
+    """One LM run on the observations `use` (Huber if `robust`); returns the updated (T_c_w, X_w, iterations)
+    and adds its build / solve milliseconds to `timings_ms`."""
+    t_start = time.perf_counter()
     obs_kf, obs_pt = problem.obs_kf[use], problem.obs_pt[use]
     meas = problem.meas[use]
     n_obs = np.bincount(obs_pt, minlength=len(X_w))
@@ -138,8 +145,12 @@ def _optimize(
     add_stereo_projection_factors(graph, kf_key[obs_kf], pt_key[obs_pt], meas, problem.inv_sigma2[use][keep], camera,
                                   np.sqrt(cfg.chi2_mono) if robust else None,
                                   np.sqrt(cfg.chi2_stereo) if robust else None)
-    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(cfg, n_iter))
+    params = lm_params(cfg, n_iter, np.concatenate([point_keys, pose_keys]))
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
+    t_built = time.perf_counter()
     result = optimizer.optimize()
+    timings_ms["build"] += 1e3 * (t_built - t_start)
+    timings_ms["solve"] += 1e3 * (time.perf_counter() - t_built)
     T_c_w = T_c_w.copy()
     X_w = X_w.copy()
     T_c_w[kf_idx] = inverse(extract_poses(result))

@@ -1,0 +1,115 @@
+"""Benchmark of dynaslam2.optim: pose-only optimization and local bundle adjustment (median ms).
+
+    python benchmarks/bench_ba.py [--repeats 7] [--set optim.ordering=COLAMD ...] [--pose-builtin]
+
+Synthetic KITTI-like problems (dynaslam2.optim.synthetic): pose-only with N = 300 and 1000
+correspondences (half stereo, 20% gross outliers); local BA on 10 local + 5 fixed keyframes
+1 m apart, 3000 points seen by up to 7 consecutive keyframes (~13-15k observations, 5% outliers).
+`--pose-builtin` also times the pose-only alternative built from gtsam built-in factors only
+(points as variables held by strong priors), to compare with the CustomFactor used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gtsam
+import numpy as np
+
+from dynaslam2.config import OptimConfig, load_config
+from dynaslam2.geometry.se3 import inverse, se3_exp, transform
+from dynaslam2.optim import BAProblem, local_bundle_adjustment, optimize_pose
+from dynaslam2.optim.gtsam_utils import (
+    add_stereo_projection_factors,
+    allocate_keys,
+    insert_points,
+    lm_params,
+    matrix_from_pose3,
+    pose3_from_matrix,
+)
+from dynaslam2.optim.reprojection import chi2, chi2_thresholds, residuals
+from dynaslam2.optim.synthetic import kitti_like_camera, make_window, observe, perturb_poses, sample_points_in_view
+
+CAMERA = kitti_like_camera()
+
+
+def pose_problem(rng: np.random.Generator, n: int):
+    T_c_w = inverse(se3_exp(np.array([0.3, -0.1, 2.0, 0.01, 0.05, -0.02])))
+    X_w = sample_points_in_view(rng, CAMERA, T_c_w, n, (3.0, 40.0))
+    obs = observe(rng, CAMERA, transform(T_c_w, X_w), rng.random(n) < 0.5, 0.2)
+    return perturb_poses(rng, T_c_w, 0.1, 0.02), X_w, obs
+
+
+def optimize_pose_builtin(T_c_w_init, X_w, meas, inv_sigma2, cfg: OptimConfig) -> np.ndarray:
+    """The same rounds with built-in factors only: points as Point3 variables held by strong priors."""
+    th = chi2_thresholds(meas, cfg.chi2_mono, cfg.chi2_stereo)
+    inliers = np.ones(len(X_w), dtype=bool)
+    T_c_w = T_c_w_init
+    for rnd in range(cfg.pose_rounds):
+        idx = np.flatnonzero(inliers)
+        (pose_key,), point_keys = allocate_keys(1, len(idx))
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        values.insert(int(pose_key), pose3_from_matrix(inverse(T_c_w_init)))
+        insert_points(values, point_keys, X_w[idx])
+        prior = gtsam.noiseModel.Isotropic.Sigma(3, 1e-6)
+        for key, X in zip(point_keys.tolist(), X_w[idx]):
+            graph.addPriorPoint3(key, X, prior)
+        robust = rnd < cfg.pose_robust_rounds
+        add_stereo_projection_factors(graph, np.zeros(len(idx), np.int64), point_keys, meas[idx], inv_sigma2[idx], CAMERA,
+                                      np.sqrt(cfg.chi2_mono) if robust else None,
+                                      np.sqrt(cfg.chi2_stereo) if robust else None)
+        params = lm_params(cfg, cfg.pose_iterations, np.concatenate([point_keys, [pose_key]]))
+        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        T_c_w = inverse(matrix_from_pose3(result.atPose3(int(pose_key))))
+        X_c = transform(T_c_w, X_w)
+        inliers = (chi2(residuals(CAMERA, X_c, meas), inv_sigma2) <= th) & (X_c[:, 2] > cfg.min_depth)
+    return T_c_w
+
+
+def median_ms(fn, repeats: int) -> tuple[float, list]:
+    times, outputs = [], []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        outputs.append(fn())
+        times.append(1e3 * (time.perf_counter() - t))
+    return float(np.median(times)), outputs
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override optim.key=value")
+    parser.add_argument("--pose-builtin", action="store_true", help="also time the built-in-factor pose-only variant")
+    parser.add_argument("--skip-pose", action="store_true")
+    args = parser.parse_args()
+    cfg = load_config(None, args.overrides).optim
+    rng = np.random.default_rng(0)
+    if not args.skip_pose:
+        for n in (300, 1000):
+            T_init, X_w, obs = pose_problem(rng, n)
+            ms, _ = median_ms(lambda: optimize_pose(T_init, X_w, obs.meas, obs.inv_sigma2, CAMERA, cfg), args.repeats)
+            print(f"pose-only N={n}: median {ms:.1f} ms (CustomFactor, {cfg.pose_rounds} rounds x "
+                  f"{cfg.pose_iterations} LM iterations)")
+            if args.pose_builtin:
+                ms, _ = median_ms(lambda: optimize_pose_builtin(T_init, X_w, obs.meas, obs.inv_sigma2, cfg), args.repeats)
+                print(f"pose-only N={n}: median {ms:.1f} ms (built-in factors, points held by priors)")
+    window = make_window(rng, CAMERA, n_keyframes=15, n_fixed=5, n_points=3000, track_length=7,
+                         outlier_fraction=0.05)
+    problem = BAProblem(window.T_c_w_init, window.fixed, window.X_w_init, window.obs_kf, window.obs_pt,
+                        window.obs.meas, window.obs.inv_sigma2)
+    ms, results = median_ms(lambda: local_bundle_adjustment(problem, CAMERA, cfg), args.repeats)
+    build = np.median([r.timings_ms["build"] for r in results])
+    solve = np.median([r.timings_ms["solve"] for r in results])
+    r = results[-1]
+    free = ~window.fixed
+    t_err = np.linalg.norm((r.T_c_w[free] @ inverse(window.T_c_w_true[free]))[:, :3, 3], axis=1).max()
+    print(f"local BA K={len(problem.T_c_w)} ({int(problem.fixed.sum())} fixed) P={len(problem.X_w)} "
+          f"M={len(problem.obs_kf)}: median {ms:.1f} ms (build {build:.1f} ms, LM {solve:.1f} ms, rest "
+          f"{ms - build - solve:.1f} ms), {r.iterations} iterations, Huber cost {r.initial_error:.0f} -> "
+          f"{r.final_error:.0f}, inliers {r.inlier.mean():.3f}, max keyframe error {100 * t_err:.1f} cm")
+
+
+if __name__ == "__main__":
+    main()
