@@ -314,6 +314,9 @@ def read_tracking_labels(path) -> list[TrackingLabel]:
     return labels_from_lines(_read_text(path, "tracking labels").splitlines(), path)
 
 
+_LABEL_NUMBERS_FORMAT = " ".join(["%.6f"] * 12)  # alpha, box2d (4), dims (3), location (3), rotation_y
+
+
 def _fmt_level(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else f"{x:.2f}"
 
@@ -323,7 +326,7 @@ def format_tracking_label(label: TrackingLabel) -> str:
     nums = (label.alpha, *label.box2d, *label.dims_hwl, *label.location, label.rotation_y)
     line = (
         f"{label.frame} {label.track_id} {label.type} {_fmt_level(label.truncated)} {int(label.occluded)} "
-        + " ".join(f"{x:.6f}" for x in nums)
+        + _LABEL_NUMBERS_FORMAT % nums
     )
     return line if label.score is None else f"{line} {label.score:.6f}"
 
