@@ -1,9 +1,12 @@
 """Median ms of ORB pyramid + extraction (left and right) and stereo matching.
 
-    python benchmarks/bench_features.py [--repeat 15]
+    python benchmarks/bench_features.py [--repeat 15] [--right-factor 1.0]
 
-Images: the real KITTI odometry 06 pair (1226x370) from ../shared/data when present, and a
-640x480 pair cut/resized from it (or a synthetic textured pair when KITTI is absent).
+Images: the real KITTI odometry 06 pair (1226x370) from ../shared/data when present (else a synthetic
+textured pair), and the same pair resized to 640x480. Wall-clock medians and, in brackets, process CPU
+medians (both cores count): on a shared machine the CPU time is the steadier figure.
+Columns: pyramid (both images), extract (left then right, one thread), pair (extract_pair: right image
+in a worker thread), stereo (match_stereo), frame = pyramid + pair + stereo.
 """
 
 from __future__ import annotations
@@ -27,48 +30,60 @@ def _pairs() -> list[tuple[str, np.ndarray, np.ndarray, StereoCamera]]:
     if left_path.exists():
         left = cv2.imread(str(left_path), cv2.IMREAD_GRAYSCALE)
         right = cv2.imread(str(right_path), cv2.IMREAD_GRAYSCALE)
+        source = "KITTI 06 #0"
     else:
         rng = np.random.default_rng(0)
         tex = cv2.GaussianBlur(rng.normal(0, 1, (370, 1290)).astype(np.float32), (0, 0), 2.0)
         tex = cv2.normalize(tex, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
         left, right = tex[:, 40:1266], tex[:, 30:1256]
+        source = "synthetic"
     fx, baseline = 707.09, 0.537
     h, w = left.shape
     kitti_cam = StereoCamera(fx, fx, w / 2, h / 2, baseline, w, h)
-    # 640x480: stretch the KITTI pair (keeps rectification: rows stay rows).
+    # 640x480: the same pair resized (rows stay rows, so it stays rectified).
     left_vga = cv2.resize(left, (640, 480), interpolation=cv2.INTER_AREA)
     right_vga = cv2.resize(right, (640, 480), interpolation=cv2.INTER_AREA)
     vga_cam = StereoCamera(fx * 640 / w, fx * 480 / h, 320.0, 240.0, baseline, 640, 480)
-    return [(f"{w}x{h}", left, right, kitti_cam), ("640x480", left_vga, right_vga, vga_cam)]
+    return [(f"{source} {w}x{h}", left, right, kitti_cam), (f"{source} 640x480", left_vga, right_vga, vga_cam)]
 
 
-def _median_ms(fn, repeat: int) -> float:
-    times = []
+def _median_ms(fn, repeat: int) -> tuple[float, float]:
+    wall, cpu = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        times.append((time.perf_counter() - t0) * 1e3)
-    return float(np.median(times))
+        wall.append((time.perf_counter() - t0) * 1e3)
+        cpu.append((time.process_time() - c0) * 1e3)
+    return float(np.median(wall)), float(np.median(cpu))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=15)
     parser.add_argument("--n-features", type=int, default=2000)
+    parser.add_argument("--right-factor", type=float, default=1.0, help="right-image budget / n_features")
     args = parser.parse_args()
     extractor = ORBExtractor(ORBConfig(n_features=args.n_features))
+    n_right = int(round(args.n_features * args.right_factor))
     stereo_cfg = StereoConfig()
-    print(f"{'image':>10} {'pyramid':>8} {'extract':>8} {'stereo':>8} {'L+R+st':>8} {'n_kp':>6} {'depth%':>7}  (median ms, cv2 threads={cv2.getNumThreads()})")
+    print(f"cv2 threads={cv2.getNumThreads()}, n_features={args.n_features}, right={n_right}; median ms wall [cpu]")
+    header = ("image", "pyramid", "extract", "pair", "stereo", "frame")
+    print(f"{header[0]:>22} " + " ".join(f"{h:>14}" for h in header[1:]) + "   n_kp  depth%")
     for name, left, right, camera in _pairs():
-        pyr_l = extractor.build_pyramid(left)
-        pyr_r = extractor.build_pyramid(right)
-        kp_l, kp_r = extractor.extract(pyr_l), extractor.extract(pyr_r)
-        t_pyr = _median_ms(lambda: extractor.build_pyramid(left), args.repeat)
-        t_ext = _median_ms(lambda: extractor.extract(pyr_l), args.repeat)
-        t_st = _median_ms(lambda: match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, stereo_cfg), args.repeat)
-        _, depth = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, stereo_cfg)
-        total = 2 * (t_pyr + t_ext) + t_st
-        print(f"{name:>10} {t_pyr:8.2f} {t_ext:8.2f} {t_st:8.2f} {total:8.2f} {len(kp_l):6d} {100 * np.mean(depth > 0):6.1f}%")
+        pyr_l, pyr_r = extractor.build_pyramid(left), extractor.build_pyramid(right)
+        kp_l, kp_r = extractor.extract_pair(pyr_l, pyr_r, n_features_right=n_right)
+
+        def stereo():
+            return match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, stereo_cfg)
+
+        t_pyr = _median_ms(lambda: (extractor.build_pyramid(left), extractor.build_pyramid(right)), args.repeat)
+        t_ext = _median_ms(lambda: (extractor.extract(pyr_l), extractor.extract(pyr_r, n_features=n_right)), args.repeat)
+        t_pair = _median_ms(lambda: extractor.extract_pair(pyr_l, pyr_r, n_features_right=n_right), args.repeat)
+        t_st = _median_ms(stereo, args.repeat)
+        t_frame = tuple(a + b + c for a, b, c in zip(t_pyr, t_pair, t_st))
+        _, depth = stereo()
+        cells = " ".join(f"{w:6.1f} [{c:5.1f}]" for w, c in (t_pyr, t_ext, t_pair, t_st, t_frame))
+        print(f"{name:>22} {cells} {len(kp_l):6d} {100 * np.mean(depth > 0):6.1f}%")
 
 
 if __name__ == "__main__":

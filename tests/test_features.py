@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import cv2
@@ -189,6 +190,41 @@ def test_stereo_subpixel_on_shifted_texture(extractor, disparity):
     err = np.abs(kp_l.uv[has, 0] - u_right[has] - disparity)
     assert np.median(err) < 0.15, np.median(err)
     assert np.mean(err < 1.0) > 0.95
+
+
+def test_stereo_on_rendered_pair_against_ground_truth_depth(extractor):
+    """Simulated street (static scenario, 640x480): disparities at keypoints vs the rendered metric depth,
+    on keypoints whose 5x5 neighbourhood has a smooth depth (a corner on a depth edge has no single GT)."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    pytest.importorskip("mujoco")
+    from sim.render import StereoRenderer
+    from sim.scenarios import load_scenario
+    from sim.world import build_world, camera_intrinsics
+
+    cfg = load_scenario("static", ["frames=1", "image_size=640x480"])
+    world = build_world(cfg)
+    world.set_time(0.0)
+    fx, fy, cx, cy = camera_intrinsics(cfg)
+    width, height = cfg.image_size
+    with StereoRenderer(world, width, height) as renderer:
+        frame = renderer.render(world.ego_T_m_c(0.0), (fx, fy, cx, cy))
+    camera = StereoCamera(fx, fy, cx, cy, cfg.baseline, width, height)
+    pyr_l, pyr_r = extractor.build_pyramid(frame.left), extractor.build_pyramid(frame.right)
+    kp_l, kp_r = extractor.extract_pair(pyr_l, pyr_r)
+    u_right, depth = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, StereoConfig())
+    has = depth > 0
+    assert has.mean() > 0.5, has.mean()
+    u, v = np.rint(kp_l.uv[has]).astype(int).T
+    z_gt = frame.depth.astype(np.float32)
+    z_max = cv2.dilate(z_gt, np.ones((5, 5), np.uint8))
+    z_min = -cv2.dilate(-np.where(z_gt > 0, z_gt, np.float32(1e9)), np.ones((5, 5), np.uint8))
+    smooth = (z_gt[v, u] > 0) & (z_max[v, u] < 1.05 * z_min[v, u])
+    assert smooth.sum() > 500
+    err = np.abs(kp_l.uv[has, 0] - u_right[has] - camera.bf / np.where(smooth, z_gt[v, u], 1.0))[smooth]
+    level0 = kp_l.octave[has][smooth] == 0
+    assert np.median(err) < 0.25, np.median(err)
+    assert np.median(err[level0]) < 0.15, np.median(err[level0])
+    assert np.mean(err < 1.0) > 0.9, np.mean(err < 1.0)
 
 
 def test_stereo_rejects_mismatched_sizes(extractor):
