@@ -1,8 +1,8 @@
 """ORB features on an image pyramid, spread over the image (ORB-SLAM2's ORBextractor, ref. [1]).
 
-Per level: one FAST pass (non-maximum suppression) at `min_th_fast`; each cell of ORB-SLAM2's grid
-(~`cell_size` px) keeps its corners scoring >= `ini_th_fast`, or the weaker ones where it has none:
-the same set as ORB-SLAM2's two FAST passes per cell (see `_detect`). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
+Per level: FAST (non-maximum suppression) at `ini_th_fast`; each cell of ORB-SLAM2's grid
+(~`cell_size` px) without a corner gets those of FAST at `min_th_fast` (ORB-SLAM2's two passes per
+cell, done as two whole-image passes, the second on a copy blanked outside the empty cells; see `_detect`). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
 the largest square cell for which at least the level's budget of cells is occupied, the best response
 per cell, then the budget's best of those. Orientation is the intensity centroid (IC_Angle) on the
 level image; the rBRIEF descriptor is OpenCV's ORB on the Gaussian-blurred level (same pattern and
@@ -148,7 +148,8 @@ class ORBExtractor:
         self.inv_level_sigma2 = 1.0 / self.level_sigma2
         self.level_budgets = level_budgets(cfg.n_features, cfg.n_levels, cfg.scale_factor)
         self._w_u, self._w_v = _ic_kernels()
-        self._fast = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
+        self._fast_ini = cv2.FastFeatureDetector_create(cfg.ini_th_fast, True)
+        self._fast_min = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
         self._worker: tuple[ThreadPoolExecutor, ORBExtractor] | None = None  # lazily, for extract_pair
         self._orb = cv2.ORB_create(
             nfeatures=1, nlevels=1, edgeThreshold=cfg.edge_threshold, patchSize=cfg.patch_size, fastThreshold=cfg.min_th_fast
@@ -200,42 +201,59 @@ class ORBExtractor:
         left = self.extract(pyr_left, mask_left)
         return left, right.result()
 
+    def _fast(self, detector, img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """FAST corners (non-maximum suppressed) as (xy, score) arrays."""
+        kps = detector.detect(img)
+        if not kps:
+            return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+        return cv2.KeyPoint.convert(kps), np.fromiter((k.response for k in kps), np.float32, len(kps))
+
     def _detect(self, level: int, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """FAST candidates (integer xy at this level, score) by ORB-SLAM2's per-cell rule: a cell keeps its
-        corners scoring >= ini_th_fast, or those >= min_th_fast where it has none. One FAST pass at
-        min_th_fast: the score does not depend on the detection threshold and a suppressing neighbour
-        scores higher, so thresholding the scores gives exactly FAST at ini_th_fast (measured faster
-        here than a second FAST pass on the empty cells). Masked-out corners are dropped first."""
+        corners at ini_th_fast, or those at min_th_fast where it has none. FAST at ini_th_fast runs on
+        the level; FAST at min_th_fast runs on a copy where the cells that have corners are blanked except
+        a 4 px rim, so every pixel of an empty cell and its suppression neighbours see the true image (same
+        corners and scores as FAST on the whole level, for a fraction of the cost). Masked-out corners
+        are dropped before the rule."""
         cfg = self.cfg
         edge = cfg.edge_threshold
         h, w = img.shape
         border = edge - 3  # ORB-SLAM2's minBorderX: cells cover [border, size - border), corners >= 3 px inside
         if w - 2 * border < 7 or h - 2 * border < 7:
             return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
-        kps = self._fast.detect(img)
-        if not kps:
-            return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
-        xy = cv2.KeyPoint.convert(kps)
-        resp = np.fromiter((k.response for k in kps), np.float32, len(kps))
-        keep = (xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)
-        xy, resp = xy[keep], resp[keep]
-        if mask is not None:
-            s = self.scale_factors[level]
-            col = np.clip(np.rint(xy[:, 0] * s).astype(np.int64), 0, mask.shape[1] - 1)
-            row = np.clip(np.rint(xy[:, 1] * s).astype(np.int64), 0, mask.shape[0] - 1)
-            keep = mask[row, col]
-            xy, resp = xy[keep], resp[keep]
         n_cx = max(1, (w - 2 * border) // cfg.cell_size)
         n_cy = max(1, (h - 2 * border) // cfg.cell_size)
         cw = int(np.ceil((w - 2 * border) / n_cx))
         ch = int(np.ceil((h - 2 * border) / n_cy))
-        cx = np.minimum((xy[:, 0].astype(np.int64) - edge) // cw, n_cx - 1)
-        cy = np.minimum((xy[:, 1].astype(np.int64) - edge) // ch, n_cy - 1)
-        cell = cy * n_cx + cx
-        strong = resp >= cfg.ini_th_fast
-        has_strong = np.bincount(cell[strong], minlength=n_cx * n_cy) > 0
-        keep = strong | ~has_strong[cell]
-        return xy[keep], resp[keep]
+
+        def usable(xy: np.ndarray) -> np.ndarray:
+            ok = (xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)
+            if mask is not None:
+                s = self.scale_factors[level]
+                col = np.clip(np.rint(xy[:, 0] * s).astype(np.int64), 0, mask.shape[1] - 1)
+                row = np.clip(np.rint(xy[:, 1] * s).astype(np.int64), 0, mask.shape[0] - 1)
+                ok &= mask[row, col]
+            return ok
+
+        def cells(x: np.ndarray, size: int, n: int) -> np.ndarray:
+            return np.clip((x.astype(np.int64) - edge) // size, 0, n - 1)
+
+        xy, resp = self._fast(self._fast_ini, img)
+        keep = usable(xy)
+        xy, resp = xy[keep], resp[keep]
+        strong = np.zeros((n_cy, n_cx), bool)
+        strong[cells(xy[:, 1], ch, n_cy), cells(xy[:, 0], cw, n_cx)] = True
+        if strong.all():
+            return xy, resp
+        weak_px = np.zeros((h, w), np.uint8)  # 255 where a pixel keeps its value: weak cells + 4 px rim
+        grid = np.repeat(np.repeat(~strong, ch, axis=0), cw, axis=1)[: h - 2 * edge, : w - 2 * edge]
+        weak_px[edge : h - edge, edge : w - edge] = grid.view(np.uint8) * np.uint8(255)
+        weak_px = cv2.dilate(weak_px, np.ones((9, 9), np.uint8))
+        xy_w, resp_w = self._fast(self._fast_min, cv2.bitwise_and(img, weak_px))
+        keep = usable(xy_w)
+        xy_w, resp_w = xy_w[keep], resp_w[keep]
+        keep = ~strong[cells(xy_w[:, 1], ch, n_cy), cells(xy_w[:, 0], cw, n_cx)]
+        return np.concatenate([xy, xy_w[keep]]), np.concatenate([resp, resp_w[keep]])
 
     def _angles(self, img: np.ndarray, xy: np.ndarray) -> np.ndarray:
         """Intensity-centroid orientation in degrees [0, 360) (ORB-SLAM2's IC_Angle)."""
