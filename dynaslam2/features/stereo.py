@@ -14,6 +14,7 @@ SAD patches are gathered per pyramid level.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
@@ -24,9 +25,11 @@ from dynaslam2.features.orb import Keypoints
 from dynaslam2.geometry.camera import StereoCamera
 
 
-
 def _row_candidates(kp_left: Keypoints, kp_right: Keypoints, n_rows: int, scale_factors, band: float):
-    """(left, right) index pairs whose right row band covers the left keypoint's row."""
+    """(left, right) index pairs: the right keypoint's row band (+-band x its scale) covers the left
+    keypoint's row and its octave is within +-1 of the left one. Right keypoints are bucketed by
+    (row, octave), so the three octaves of a left keypoint's row are one contiguous run."""
+    n_oct = int(max(kp_left.octave.max(), kp_right.octave.max())) + 1
     r = band * np.asarray(scale_factors)[kp_right.octave]
     v = kp_right.uv[:, 1].astype(np.float64)
     row_lo = np.clip(np.floor(v - r).astype(np.int64), 0, n_rows - 1)
@@ -34,14 +37,16 @@ def _row_candidates(kp_left: Keypoints, kp_right: Keypoints, n_rows: int, scale_
     n_rows_of = row_hi - row_lo + 1
     j = np.repeat(np.arange(len(kp_right)), n_rows_of)
     rows = np.repeat(row_lo, n_rows_of) + (np.arange(len(j)) - np.repeat(np.cumsum(n_rows_of) - n_rows_of, n_rows_of))
-    order = np.argsort(rows, kind="stable")  # within a row: right keypoints in index order
-    j, rows = j[order], rows[order]
-    starts = np.searchsorted(rows, np.arange(n_rows + 1))
-    row_left = np.clip(kp_left.uv[:, 1].astype(np.int64), 0, n_rows - 1)
-    count = starts[row_left + 1] - starts[row_left]
+    key = rows * n_oct + kp_right.octave[j]
+    order = np.argsort(key, kind="stable")
+    j = j[order]
+    starts = np.searchsorted(key[order], np.arange(n_rows * n_oct + 1))
+    row_left = np.clip(kp_left.uv[:, 1].astype(np.int64), 0, n_rows - 1) * n_oct
+    first = starts[row_left + np.maximum(kp_left.octave - 1, 0)]
+    count = starts[row_left + np.minimum(kp_left.octave + 1, n_oct - 1) + 1] - first
     i = np.repeat(np.arange(len(kp_left)), count)
     offs = np.arange(len(i)) - np.repeat(np.cumsum(count) - count, count)
-    return i, j[np.repeat(starts[row_left], count) + offs]
+    return i, j[np.repeat(first, count) + offs]
 
 
 def _gather_patches(img_l, img_r, su_l, sv_l, su_r, w: int, L: int):
@@ -71,11 +76,12 @@ def _sad_curve(patch_l: np.ndarray, strip: np.ndarray, w: int, L: int, centre: s
         col_sum = np.concatenate([np.zeros((K, 1), np.float32), np.cumsum(strip.sum(axis=1), axis=1)], axis=1)
         ref_r = (col_sum[:, k:] - col_sum[:, :-k]) / (k * k)  # box mean of the window at each offset
     centred_l = patch_l - ref_l[:, None, None]
+    rows_r = strip.reshape(K * k, k + 2 * L)  # all strips stacked: offset o = columns o..o+k-1
     dists = np.empty((K, n_off), np.float32)
-    for o in range(n_off):  # loop over the 2L+1 offsets, vectorized over keypoints
-        diff = strip[:, :, o : o + k] - centred_l
-        diff -= ref_r[:, o, None, None]
-        dists[:, o] = np.abs(diff, out=diff).reshape(K, -1).sum(axis=1)
+    for o in range(n_off):  # loop over the 2L+1 offsets, vectorized (OpenCV) over keypoints
+        target = (centred_l + ref_r[:, o, None, None]).reshape(K * k, k)
+        absdiff = cv2.absdiff(rows_r[:, o : o + k], target).reshape(K, k * k)
+        dists[:, o] = cv2.reduce(absdiff, 1, cv2.REDUCE_SUM).ravel()
     return dists
 
 
@@ -117,19 +123,20 @@ def match_stereo(
     i, j = _row_candidates(kp_left, kp_right, pyr_left[0].shape[0], scale_factors, cfg.row_band_scale)
     u_l = kp_left.uv[:, 0].astype(np.float64)
     u_r = kp_right.uv[:, 0].astype(np.float64)
-    keep = np.abs(kp_right.octave[j] - kp_left.octave[i]) <= 1
-    keep &= (u_r[j] >= u_l[i] - max_d) & (u_r[j] <= u_l[i] - min_d)
+    d_lr = u_l[i] - u_r[j]
+    keep = (d_lr >= min_d) & (d_lr <= max_d)
     i, j = i[keep], j[keep]
     if len(i) == 0:
         return u_right, depth
     dist = hamming_pairs(kp_left.desc[i], kp_right.desc[j]).astype(np.int64)
-    # Pairs are grouped by left index (increasing right index inside a group): the best per group is
-    # the smallest (distance, position) key, i.e. ORB-SLAM2's first strict minimum.
+    # Pairs are grouped by left index: the best per group is the smallest (distance, right index) key,
+    # i.e. ORB-SLAM2's first strict minimum over right keypoints in index order.
     starts = np.flatnonzero(np.r_[True, i[1:] != i[:-1]])
-    key = np.minimum.reduceat(dist * len(i) + np.arange(len(i)), starts)
-    best = key % len(i)
-    good = dist[best] < min(cfg.th_high, (cfg.th_high + cfg.th_low) / 2.0)
-    i, j = i[best[good]], j[best[good]]
+    n_right = len(kp_right)
+    key = np.minimum.reduceat(dist * n_right + j, starts)
+    i, j, best_dist = i[starts], key % n_right, key // n_right
+    good = best_dist < min(cfg.th_high, (cfg.th_high + cfg.th_low) / 2.0)
+    i, j = i[good], j[good]
     if len(i) == 0:
         return u_right, depth
 
