@@ -289,11 +289,14 @@ class PlannedActor:
 
 @dataclass(frozen=True)
 class Prop:
-    """Static street furniture that occludes: kind "tree" or "pole" at (x, y)."""
+    """Static street furniture that occludes, on the sidewalk next to the kerb: kind "tree", "pole",
+    "hedge" (low long box) or "kiosk" (box), centred at (x, y) with a (length, width) footprint."""
 
     kind: str
     x: float
     y: float
+    length: float
+    width: float
 
 
 @dataclass(frozen=True)
@@ -358,14 +361,14 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
     fp.add(ego, EGO_DIMS[0] + 2 * EGO_CLEARANCE, EGO_DIMS[1])
     props = _plan_props(cfg, layout, rng_prop, ego_end)
     for p in props:
-        fp.add(static_trajectory(p.x, p.y, 0.0), 0.8, 0.8)
+        fp.add(static_trajectory(p.x, p.y, 0.0), p.length, p.width)
     actors: list[PlannedActor] = []
 
-    def try_add(make, tries: int = 40, margin: float = 0.5) -> PlannedActor | None:
-        """Draw candidates from `make()` until one overlaps nothing planned so far; None if all do."""
+    def try_add(make, tries: int = 40, margin: float = 0.5, valid=None) -> PlannedActor | None:
+        """Draw candidates from `make()` until one is `valid` and overlaps nothing planned so far; None if all fail."""
         for _ in range(tries):
             cls, dims, traj = make()
-            if not fp.collides(traj, dims[0], dims[1], margin):
+            if (valid is None or valid(traj)) and not fp.collides(traj, dims[0], dims[1], margin):
                 fp.add(traj, dims[0], dims[1])
                 actors.append(PlannedActor(cls, dims, traj))
                 return actors[-1]
@@ -379,37 +382,55 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
 
 
 def _plan_props(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float) -> list[Prop]:
-    spacing = 30.0 - 22.0 * cfg.occlusion
+    """Kerbside furniture; `occlusion` shortens the spacing and favours hedges and kiosks (which hide
+    parked vehicles and pedestrians) over thin poles and trees."""
+    occ = cfg.occlusion
+    spacing = 30.0 - 20.0 * occ
+    p_kind = np.array([0.55 - 0.25 * occ, 0.45 - 0.25 * occ, 0.35 * occ, 0.15 * occ])
+    p_kind /= p_kind.sum()
     props = []
     for side in (-1.0, 1.0):
         x = layout.x_lo + rng.uniform(0, spacing)
         while x < layout.x_hi:
-            if not layout.in_intersection(x, cfg.sidewalk_width + 1.0):
-                kind = "tree" if rng.random() < 0.6 else "pole"
-                props.append(Prop(kind, float(x), float(side * (layout.kerb + 0.7))))
-            x += spacing * rng.uniform(0.6, 1.4)
+            kind = str(rng.choice(["tree", "pole", "hedge", "kiosk"], p=p_kind))
+            length, width = {"tree": (0.6, 0.6), "pole": (0.4, 0.4), "hedge": (rng.uniform(2.5, 6.0), 0.8),
+                             "kiosk": (rng.uniform(1.4, 2.2), rng.uniform(1.2, 1.6))}[kind]
+            if not layout.in_intersection(x, cfg.sidewalk_width + length / 2 + 1.0):
+                y = side * (layout.kerb + 0.3 + width / 2)
+                props.append(Prop(kind, float(x), float(y), float(length), float(width)))
+            x += length + spacing * rng.uniform(0.6, 1.4)
     return props
 
 
 def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, n: int, try_add) -> None:
+    """Parked vehicles in the parking strips; with probability `occlusion` a vehicle parks right
+    behind or ahead of one already parked (rows of vehicles hide each other), and `occlusion`
+    raises the share of vans and trucks."""
     p_large = 0.15 + 0.5 * cfg.occlusion
-    margin = 2.0 - 1.6 * cfg.occlusion
     y_strip = layout.half_road + 0.5 * cfg.parking_width
+    parked: list[PlannedActor] = []
 
     def make():
         cls = "car" if rng.random() > p_large else ("van" if rng.random() < 0.65 else "truck")
         dims = _dims(rng, cls)
-        side = -1.0 if rng.random() < 0.5 else 1.0
-        while True:
+        if parked and rng.random() < cfg.occlusion:
+            nb = parked[int(rng.integers(len(parked)))]
+            x_nb, y_nb, _ = nb.trajectory.pose(0.0)
+            side = float(np.sign(y_nb))
+            x = float(x_nb) + rng.choice([-1.0, 1.0]) * (0.5 * (nb.dims[0] + dims[0]) + rng.uniform(0.7, 1.6))
+        else:
+            side = -1.0 if rng.random() < 0.5 else 1.0
             x = rng.uniform(-10.0, min(layout.x_hi - 10.0, ego_end + 70.0))
-            if not layout.in_intersection(x, cfg.sidewalk_width + dims[0] / 2 + 2.0):
-                break
+        if layout.in_intersection(x, cfg.sidewalk_width + dims[0] / 2 + 2.0):
+            x = layout.x_hi + 1e3  # off the street: rejected below
         y = side * (y_strip + rng.uniform(-0.15, 0.15) - 0.5 * max(0.0, dims[1] - 2.0))
         yaw = (0.0 if side < 0 else np.pi) + rng.uniform(-0.04, 0.04)
         return cls, dims, static_trajectory(x, y, yaw)
 
     for _ in range(n):
-        try_add(make, margin=margin)
+        added = try_add(make, margin=0.4, valid=lambda traj: float(traj.pose(0.0)[0]) < layout.x_hi)
+        if added is not None:
+            parked.append(added)
 
 
 def _moving_class(rng: np.random.Generator) -> str:
@@ -431,8 +452,7 @@ def _plan_moving(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Traje
         _plan_followers(cfg, layout, rng, ego, n_follow, try_add)
     lanes = [(i, False) for i in range(layout.lanes_per_direction)] + \
             [(i, True) for i in range(layout.lanes_per_direction)]
-    dist = np.array([i if not onc else i + 1 for i, onc in lanes], float)
-    weights = (0.5 + cfg.occlusion) ** (-dist)
+    weights = np.ones(len(lanes))
     if cfg.layout != "street":  # ego lane is reserved for followers / the stop line
         weights[0] = 0.0
     weights /= weights.sum()
@@ -456,7 +476,7 @@ def _plan_lane(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: flo
         cls = _moving_class(rng)
         dims = _dims(rng, cls)
         if ego_lane:  # ahead of the ego and faster, never stopping
-            x0 = rng.uniform(15.0, 40.0)
+            x0 = rng.uniform(12.0, 40.0 - 25.0 * cfg.occlusion)
             prof = stop_and_go_profile(rng, max(cfg.ego_speed * 1.3, 9.0) * max(k, 1.0), duration, 0.0, 0.1)
         elif oncoming:
             x0 = rng.uniform(0.3 * ego_end + 30.0, layout.x_hi)
@@ -474,7 +494,7 @@ def _plan_lane(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: flo
     def make_follower():
         cls = _moving_class(rng)
         dims = _dims(rng, cls)
-        gap = 0.5 * (last[0].dims[0] + dims[0]) + rng.uniform(2.5, 7.0)
+        gap = 0.5 * (last[0].dims[0] + dims[0]) + (1.0 - 0.7 * cfg.occlusion) * rng.uniform(2.5, 7.0)
         return cls, dims, last[0].trajectory.follower(rng.uniform(0.8, 1.8), gap)
 
     for _ in range(count):

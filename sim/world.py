@@ -318,7 +318,7 @@ def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
             r = rng.uniform(1.3, 2.0)
             wb.add_geom(type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[r, r, r * rng.uniform(0.9, 1.4)],
                         pos=[p.x, p.y, trunk_h + r * 0.8], material=leaves[k], **_VISUAL)
-        else:
+        elif p.kind == "pole":
             h = rng.uniform(5.0, 7.0)
             wb.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.09, h / 2], pos=[p.x, p.y, h / 2],
                         material=metals[k], **_VISUAL)
@@ -328,6 +328,13 @@ def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
             if rng.random() < 0.5:  # a sign board
                 b.box(wb, (p.x, p.y, rng.uniform(2.2, 3.0)), (0.04, 0.35, 0.3),
                       b.material(tex.vehicle_paint(rng, 64, rich=b.rich)))
+        elif p.kind == "hedge":
+            h = rng.uniform(0.9, 1.4)
+            b.box(wb, (p.x, p.y, 0.15 + h / 2), (p.length / 2, p.width / 2, h / 2), leaves[k])
+        else:  # kiosk / advertising box
+            h = rng.uniform(2.3, 2.9)
+            b.box(wb, (p.x, p.y, 0.15 + h / 2), (p.length / 2, p.width / 2, h / 2),
+                  b.material(tex.vehicle_paint(rng, 128, rich=b.rich)))
 
 
 def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) -> None:
