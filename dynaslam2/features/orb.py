@@ -2,7 +2,8 @@
 
 Per level: FAST (non-maximum suppression) at `ini_th_fast`; each cell of ORB-SLAM2's grid
 (~`cell_size` px) without a corner gets those of FAST at `min_th_fast` (ORB-SLAM2's two passes per
-cell, done as two whole-image passes, the second on a copy blanked outside the empty cells; see `_detect`). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
+cell, done as two whole-image passes, the second on a copy blanked outside the empty cells; see
+`_detect`). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
 the largest square cell for which at least the level's budget of cells is occupied, the best response
 per cell, then the budget's best of those. Orientation is the intensity centroid (IC_Angle) on the
 level image; the rBRIEF descriptor is OpenCV's ORB on the Gaussian-blurred level (same pattern and
@@ -11,6 +12,7 @@ blur as ORB-SLAM2). OpenCV 5.0 keeps the angle of provided keypoints (checked in
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -150,7 +152,7 @@ class ORBExtractor:
         self._w_u, self._w_v = _ic_kernels()
         self._fast_ini = cv2.FastFeatureDetector_create(cfg.ini_th_fast, True)
         self._fast_min = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
-        self._worker: tuple[ThreadPoolExecutor, ORBExtractor] | None = None  # lazily, for extract_pair
+        self._worker: tuple[int, ThreadPoolExecutor, ORBExtractor] | None = None  # (pid, pool, twin) for extract_pair
         self._orb = cv2.ORB_create(
             nfeatures=1, nlevels=1, edgeThreshold=cfg.edge_threshold, patchSize=cfg.patch_size, fastThreshold=cfg.min_th_fast
         )
@@ -194,9 +196,9 @@ class ORBExtractor:
         runs in a worker thread: OpenCV and the large numpy operations release the GIL."""
         if self.cfg.threads <= 1:
             return self.extract(pyr_left, mask_left), self.extract(pyr_right, None, n_features_right)
-        if self._worker is None:
-            self._worker = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="orb-right"), ORBExtractor(self.cfg))
-        pool, twin = self._worker
+        if self._worker is None or self._worker[0] != os.getpid():  # a forked child gets its own thread
+            self._worker = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="orb-right"), ORBExtractor(self.cfg))
+        _, pool, twin = self._worker
         right = pool.submit(twin.extract, pyr_right, None, n_features_right)
         left = self.extract(pyr_left, mask_left)
         return left, right.result()
