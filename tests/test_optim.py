@@ -147,7 +147,8 @@ def ba_problem(seed: int, outlier_fraction: float = 0.0, n_fixed: int = 3, noise
 def test_local_ba_exact_measurements_recover_the_window_exactly():
     """Noise-free inliers plus gross outliers: the optimum is the truth (the fixed keyframes set the gauge)."""
     window, problem = ba_problem(7, outlier_fraction=0.05, noise_scale=0.0)
-    result = local_bundle_adjustment(problem, CAMERA, OptimConfig())
+    # all 5 + 10 iterations (no early stop): far monocular points converge slowly along their rays
+    result = local_bundle_adjustment(problem, CAMERA, OptimConfig(ba_relative_error_tol=0.0))
     free = ~window.fixed
     dt, dr = pose_errors(result.T_c_w[free], window.T_c_w_true[free])
     assert dt.max() < 1e-4 and dr.max() < 1e-3
@@ -158,7 +159,15 @@ def test_local_ba_exact_measurements_recover_the_window_exactly():
     # good observations of points also hit by an outlier may be dragged off in the robust stage (as ORB-SLAM2)
     assert result.inlier[~window.obs.outlier].mean() > 0.97
     clean = (n_bad == 0) & (n_obs >= 2)
-    assert np.abs(result.X_w - window.X_w_true)[clean].max() < 1e-3
+    T = result.T_c_w[problem.obs_kf]
+    X_c = np.einsum("mij,mj->mi", T[:, :3, :3], result.X_w[problem.obs_pt]) + T[:, :3, 3]
+    reprojection = np.abs(CAMERA.project_stereo(X_c) - problem.meas)
+    reprojection[problem.meas[:, 2] < 0, 2] = 0.0
+    assert reprojection[clean[problem.obs_pt]].max() < 1e-3  # px: every clean observation fitted exactly
+    # position: stereo points exactly; the depth of a far 2-view monocular point is weakly determined
+    # (1 px ~ 3 m at 50 m with 1 m between views), so it is only checked through its reprojection above
+    n_stereo = np.bincount(problem.obs_pt, weights=problem.meas[:, 2] >= 0, minlength=len(problem.X_w))
+    assert np.abs(result.X_w - window.X_w_true)[clean & (n_stereo > 0)].max() < 1e-3
 
 
 def test_local_ba_noisy_window_and_fixed_keyframes():
@@ -190,3 +199,12 @@ def test_local_ba_bad_input():
     problem.obs_pt[0] = len(problem.X_w)
     with pytest.raises(InputError, match="obs_pt"):
         local_bundle_adjustment(problem, CAMERA, OptimConfig())
+
+
+def test_local_ba_without_observations_returns_the_input():
+    _, problem = ba_problem(10)
+    empty = BAProblem(problem.T_c_w, problem.fixed, problem.X_w, problem.obs_kf[:0], problem.obs_pt[:0],
+                      problem.meas[:0], problem.inv_sigma2[:0])
+    result = local_bundle_adjustment(empty, CAMERA, OptimConfig())
+    assert np.array_equal(result.T_c_w, problem.T_c_w) and np.array_equal(result.X_w, problem.X_w)
+    assert result.inlier.shape == (0,) and result.iterations == 0

@@ -44,8 +44,8 @@ def _robust(model: gtsam.noiseModel.Base, delta: float | None) -> gtsam.noiseMod
     return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(delta), model)
 
 
-def lm_params(cfg: OptimConfig, max_iterations: int, ordering_keys: np.ndarray | None = None
-              ) -> gtsam.LevenbergMarquardtParams:
+def lm_params(cfg: OptimConfig, max_iterations: int, relative_error_tol: float,
+              ordering_keys: np.ndarray | None = None) -> gtsam.LevenbergMarquardtParams:
     """Levenberg-Marquardt settings from the config; `ordering_keys` (elimination order) is used when
     `cfg.ordering == "SCHUR"`, else gtsam computes COLAMD / METIS on the graph."""
     params = gtsam.LevenbergMarquardtParams()
@@ -55,7 +55,7 @@ def lm_params(cfg: OptimConfig, max_iterations: int, ordering_keys: np.ndarray |
         params.setOrdering(gtsam.Ordering(ordering_keys.tolist()))
     else:
         params.setOrderingType("METIS" if cfg.ordering == "METIS" else "COLAMD")
-    params.setRelativeErrorTol(cfg.relative_error_tol)
+    params.setRelativeErrorTol(relative_error_tol)
     params.setlambdaInitial(cfg.lambda_initial)
     params.setDiagonalDamping(cfg.diagonal_damping)
     return params

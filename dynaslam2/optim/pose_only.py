@@ -72,7 +72,7 @@ def _solve(
     graph.push_back(pose_only_factor(0, X_w, meas, inv_sigma2, huber_delta2, camera, cfg.min_depth))
     values = gtsam.Values()
     values.insert(0, pose3_from_matrix(inverse(T_c_w)))
-    params = lm_params(cfg, cfg.pose_iterations)
+    params = lm_params(cfg, cfg.pose_iterations, cfg.pose_relative_error_tol)
     T_w_c = matrix_from_pose3(gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize().atPose3(0))
     return inverse(T_w_c)
 

@@ -27,20 +27,6 @@ def residuals(camera: StereoCamera, X_c: np.ndarray, meas: np.ndarray) -> np.nda
     return e
 
 
-def jacobian_point(camera: StereoCamera, X_c: np.ndarray, meas: np.ndarray) -> np.ndarray:
-    """(M, 3, 3) d residual / d X_c (mono rows: third row zero)."""
-    inv_z = 1.0 / X_c[:, 2]
-    J = np.zeros((len(X_c), 3, 3))
-    J[:, 0, 0] = camera.fx * inv_z
-    J[:, 0, 2] = -camera.fx * X_c[:, 0] * inv_z**2
-    J[:, 1, 1] = camera.fy * inv_z
-    J[:, 1, 2] = -camera.fy * X_c[:, 1] * inv_z**2
-    J[:, 2, 0] = J[:, 0, 0]
-    J[:, 2, 2] = -(camera.fx * X_c[:, 0] - camera.bf) * inv_z**2
-    J[~is_stereo(meas), 2, :] = 0.0
-    return J
-
-
 def chi2(e: np.ndarray, inv_sigma2: np.ndarray) -> np.ndarray:
     """(M,) squared Mahalanobis norms of (M, 3) residuals, isotropic sigma^-2 per observation."""
     return np.einsum("ij,ij->i", e, e) * inv_sigma2
