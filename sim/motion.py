@@ -403,8 +403,8 @@ def _plan_props(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: fl
 
 
 def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, n: int, try_add) -> None:
-    """Parked vehicles in the parking strips; with probability `occlusion` a vehicle parks right
-    behind or ahead of one already parked (rows of vehicles hide each other), and `occlusion`
+    """Parked vehicles in the parking strips; with probability 0.75*`occlusion` a vehicle parks right
+    behind or ahead of the last one parked (rows of vehicles hide each other), and `occlusion`
     raises the share of vans and trucks."""
     p_large = 0.15 + 0.5 * cfg.occlusion
     y_strip = layout.half_road + 0.5 * cfg.parking_width
@@ -413,8 +413,8 @@ def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: f
     def make():
         cls = "car" if rng.random() > p_large else ("van" if rng.random() < 0.65 else "truck")
         dims = _dims(rng, cls)
-        if parked and rng.random() < cfg.occlusion:
-            nb = parked[int(rng.integers(len(parked)))]
+        if parked and rng.random() < 0.75 * cfg.occlusion:  # continue the last row
+            nb = parked[-1]
             x_nb, y_nb, _ = nb.trajectory.pose(0.0)
             side = float(np.sign(y_nb))
             x = float(x_nb) + rng.choice([-1.0, 1.0]) * (0.5 * (nb.dims[0] + dims[0]) + rng.uniform(0.7, 1.6))

@@ -127,9 +127,10 @@ class World:
 class _Builder:
     """Adds textures, materials and geoms to an MjSpec with unique names."""
 
-    def __init__(self, spec: mujoco.MjSpec, rich: bool):
+    def __init__(self, spec: mujoco.MjSpec, rich: bool, px: int):
         self.spec = spec
         self.rich = rich
+        self.px = px  # side of vehicle textures; facades up to twice that
         self.n = 0
 
     def material(self, img: np.ndarray | None, rgba=(1, 1, 1, 1), specular: float = 0.1,
@@ -162,7 +163,7 @@ def build_world(cfg: ScenarioConfig) -> World:
     rng_actor = np.random.default_rng(seeds[2])
     spec = mujoco.MjSpec()
     spec.modelname = f"street_{cfg.name}_{cfg.seed}"
-    b = _Builder(spec, cfg.texture == "rich")
+    b = _Builder(spec, cfg.texture == "rich", cfg.texture_px)
     _setup_visual(spec, cfg)
     _add_scenery(b, plan, cfg, rng_scene)
     bodies = []
@@ -268,7 +269,7 @@ def _add_intersection(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Gene
                 height = rng.uniform(6.0, 25.0)
                 depth = rng.uniform(10.0, 14.0)
                 xc = lay.x_int + xs * (lay.cross_half + cfg.sidewalk_width + depth / 2)
-                fmat = b.material(tex.facade(rng, width, height, rich=b.rich))
+                fmat = b.material(tex.facade(rng, width, height, max_px=2 * b.px, rich=b.rich))
                 b.box(wb, (xc, side * (y + width / 2), height / 2), (width / 2, depth / 2, height / 2), fmat, quat=q)
                 y += width
 
@@ -291,7 +292,7 @@ def _add_buildings(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generat
             depth = rng.uniform(10.0, 15.0)
             setback = rng.uniform(0.0, 1.5)
             yc = side * (lay.sidewalk_outer + setback + depth / 2)
-            mat = b.material(tex.facade(rng, width, height, rich=b.rich))
+            mat = b.material(tex.facade(rng, width, height, max_px=2 * b.px, rich=b.rich))
             b.box(wb, ((a + c) / 2, yc, height / 2), (width / 2, depth / 2, height / 2), mat)
             if setback > 0.05:  # forecourt pavement up to the facade
                 b.box(wb, ((a + c) / 2, side * (lay.sidewalk_outer + setback / 2), 0.07),
@@ -299,7 +300,7 @@ def _add_buildings(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generat
     span = lay.sidewalk_outer + 15.0
     for xe, sgn in ((x0 - 8.0, 1), (x1 + 8.0, -1)):  # end walls closing the street
         height = rng.uniform(12.0, 25.0)
-        mat = b.material(tex.facade(rng, 2 * span, height, rich=b.rich))
+        mat = b.material(tex.facade(rng, 2 * span, height, max_px=2 * b.px, rich=b.rich))
         b.box(wb, (xe, 0.0, height / 2), (8.0, span, height / 2), mat)
 
 
@@ -340,7 +341,7 @@ def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
 def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) -> None:
     """Boxes and wheels that fill the (L, W, H) box centred on the body origin exactly."""
     L, W, H = pa.dims
-    size = 256
+    size = b.px
     paint = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.4, shininess=0.6)
     glass = b.material(tex.glass(rng, 128, rich=b.rich), specular=0.6, shininess=0.8)
     tyre = b.material(None, rgba=(0.08, 0.08, 0.08, 1), specular=0.05)
