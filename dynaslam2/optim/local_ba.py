@@ -1,8 +1,12 @@
 """Local bundle adjustment over a covisible window, the rest fixed (ORB-SLAM2's LocalBundleAdjustment).
 
 The problem is plain arrays (`BAProblem`); gtsam stays inside. Keyframe `k` is the gtsam Pose3
-`T_w_c` at key `pose_keys[k]`, point `j` the Point3 `X_w` at `point_keys[j]` (`allocate_keys`).
-"""
+`T_w_c` at key `pose_keys[k]`, point `j` the Point3 `X_w` at `point_keys[j]` (`allocate_keys`); a
+later block of variables (objects) adds a size to `allocate_keys` and its own factors.
+
+Cost (benchmarks/bench_ba.py, 15 keyframes, 3000 points, 14k observations): building the graph in
+C++ (`add_stereo_projection_factors`) takes ~10% of the time; gtsam's linearization and multifrontal
+elimination (~60-100 ms per LM step for ~2800 variables on this machine) dominate."""
 
 from __future__ import annotations
 

@@ -1,12 +1,11 @@
 """Pose-only optimization with Huber kernels and chi-square outlier rounds (ORB-SLAM2's PoseOptimization).
 
 The points are constants, so the problem has one 6-dof variable. gtsam has no built-in pose-only
-stereo factor; the alternatives built from built-in factors (points as variables held by strong
-priors or NonlinearEquality) make gtsam eliminate one clique per point, measured ~35 ms per
-10 LM iterations at N=1000 (benchmarks/bench_ba.py, `--pose-variant builtin`). So all correspondences
-go into ONE `gtsam.CustomFactor` whose residuals and Jacobians are vectorized numpy: gtsam's
-Levenberg-Marquardt drives the 6-dof solve.
-"""
+stereo factor; built from built-in factors only (points as Point3 variables held by strong priors,
+`python benchmarks/bench_ba.py --pose-builtin`), gtsam eliminates one clique per point: measured
+70 / 212 ms CPU for N = 300 / 1000, against 8 / 11 ms for ONE `gtsam.CustomFactor` holding all
+correspondences with closed-form vectorized numpy residuals and Jacobians (same rounds, same
+thresholds). gtsam's Levenberg-Marquardt drives the 6-dof solve."""
 
 from __future__ import annotations
 
