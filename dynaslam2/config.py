@@ -91,10 +91,10 @@ class TrackingConfig:
     mask_dilation_px: int = 5
     # Motion-model search radius (px at level 0, scaled by the keypoint level) and minimum matches.
     motion_radius: float = 7.0
+    motion_nn_ratio: float = 1.0
     motion_min_matches: int = 20
-    # Reference-keyframe fallback: minimum descriptor matches; projection window around the prediction.
+    # Reference-keyframe fallback: minimum descriptor matches and ratio test.
     ref_min_matches: int = 15
-    ref_window_px: float = 80.0
     ref_nn_ratio: float = 0.7
     # Pose-only tracking succeeds with this many inlier map matches (motion model / reference KF).
     min_pose_inliers: int = 10
@@ -150,16 +150,16 @@ class MappingConfig:
     fuse_neighbours: int = 10
     fuse_second_neighbours: int = 5
     fuse_radius: float = 3.0
-    # Map-point culling: found/visible ratio and minimum observers after a few keyframes.
+    # Map-point culling: found/visible ratio; after a few keyframes, culled when its observation count
+    # (a stereo observation counts 2, as ORB-SLAM2) is at most cull_obs_threshold.
     cull_found_ratio: float = 0.25
-    cull_min_observers: int = 3
+    cull_obs_threshold: int = 3
     cull_after_keyframes: int = 2
     # Keyframe culling: redundant if this fraction of its close points is seen by >= N other keyframes.
     kf_cull_redundancy: float = 0.9
     kf_cull_observers: int = 3
     # Local BA: window of covisible keyframes around the new one.
     ba_max_keyframes: int = 20
-    ba_min_covisibility: int = 0
 
     def validate(self) -> None:
         if self.covisibility_min_weight < 1:

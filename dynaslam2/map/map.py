@@ -14,26 +14,28 @@ from dynaslam2.map.map_point import MapPoints, distinctive_descriptors
 
 
 class ObservationTable:
-    """Rows (kf, pt, kp, valid); erased rows stay with valid = False."""
+    """Rows (kf, pt, kp, w, valid); erased rows stay with valid = False. `w` = 2 for a stereo
+    observation and 1 for a monocular one (ORB-SLAM2's observation count)."""
 
     def __init__(self, capacity: int = 16384) -> None:
         self.size = 0
         self.kf = np.zeros(capacity, dtype=np.int64)
         self.pt = np.zeros(capacity, dtype=np.int64)
         self.kp = np.zeros(capacity, dtype=np.int64)
+        self.w = np.zeros(capacity, dtype=np.int64)
         self.valid = np.zeros(capacity, dtype=bool)
 
-    def append(self, kf: np.ndarray, pt: np.ndarray, kp: np.ndarray) -> np.ndarray:
+    def append(self, kf: np.ndarray, pt: np.ndarray, kp: np.ndarray, w: np.ndarray) -> np.ndarray:
         n = len(pt)
         if self.size + n > len(self.kf):
             cap = max(2 * len(self.kf), self.size + n)
-            for name in ("kf", "pt", "kp", "valid"):
+            for name in ("kf", "pt", "kp", "w", "valid"):
                 old = getattr(self, name)
                 new = np.zeros(cap, dtype=old.dtype)
                 new[: self.size] = old[: self.size]
                 setattr(self, name, new)
         rows = np.arange(self.size, self.size + n)
-        self.kf[rows], self.pt[rows], self.kp[rows], self.valid[rows] = kf, pt, kp, True
+        self.kf[rows], self.pt[rows], self.kp[rows], self.w[rows], self.valid[rows] = kf, pt, kp, w, True
         self.size += n
         return rows
 
@@ -82,10 +84,11 @@ class Map:
         pt_ids = np.asarray(pt_ids, dtype=np.int64)
         if len(kp_idx) == 0:
             return
-        rows = self.obs.append(np.full(len(kp_idx), kf.id), pt_ids, kp_idx)
+        w = np.where(kf.u_right[kp_idx] >= 0, 2, 1)
+        rows = self.obs.append(np.full(len(kp_idx), kf.id), pt_ids, kp_idx, w)
         kf.point_ids[kp_idx] = pt_ids
         kf.obs_row[kp_idx] = rows
-        np.add.at(self.points.n_obs, pt_ids, 1)
+        np.add.at(self.points.n_obs, pt_ids, w)
 
     def erase_observations(self, kf: KeyFrame, kp_idx: np.ndarray) -> None:
         kp_idx = np.asarray(kp_idx, dtype=np.int64)
@@ -94,7 +97,7 @@ class Map:
             return
         rows = kf.obs_row[kp_idx]
         self.obs.valid[rows] = False
-        np.subtract.at(self.points.n_obs, kf.point_ids[kp_idx], 1)
+        np.subtract.at(self.points.n_obs, kf.point_ids[kp_idx], self.obs.w[rows])
         kf.point_ids[kp_idx] = -1
         kf.obs_row[kp_idx] = -1
 
@@ -115,7 +118,7 @@ class Map:
             if kf is not None:
                 kf.point_ids[self.obs.kp[r]] = -1
                 kf.obs_row[self.obs.kp[r]] = -1
-        np.subtract.at(self.points.n_obs, self.obs.pt[rows], 1)
+        np.subtract.at(self.points.n_obs, self.obs.pt[rows], self.obs.w[rows])
         self.obs.valid[rows] = False
 
     def replace_points(self, old_ids: np.ndarray, new_ids: np.ndarray) -> None:
@@ -150,9 +153,9 @@ class Map:
         drop = dup | dup_within
         self._drop_rows(rows[drop])
         move = rows[~drop]
-        np.subtract.at(self.points.n_obs, self.obs.pt[move], 1)
+        np.subtract.at(self.points.n_obs, self.obs.pt[move], self.obs.w[move])
         self.obs.pt[move] = tgt[~drop]
-        np.add.at(self.points.n_obs, tgt[~drop], 1)
+        np.add.at(self.points.n_obs, tgt[~drop], self.obs.w[move])
         for kf_id in np.unique(self.obs.kf[move]):
             kf = self.keyframes.get(int(kf_id))
             r = move[self.obs.kf[move] == kf_id]

@@ -16,7 +16,7 @@ class MapPoints:
 
     X_w: position; desc: representative ORB descriptor; normal: mean viewing direction;
     min_dist/max_dist: scale-invariance distance range; n_visible/n_found: tracking counters
-    (found ratio = n_found / n_visible); n_obs: observing keyframes; first_kf/ref_kf: keyframe ids;
+    (found ratio = n_found / n_visible); n_obs: observation count (stereo observations count 2, as ORB-SLAM2); first_kf/ref_kf: keyframe ids;
     replaced_by: the id of the point this one was fused into (-1 if none).
     """
 

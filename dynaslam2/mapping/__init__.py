@@ -1,0 +1,1 @@
+"""Keyframe insertion and local mapping (triangulation, fusion, culling, local BA)."""

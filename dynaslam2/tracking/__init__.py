@@ -1,0 +1,2 @@
+"""Camera tracking: frame construction (frontend), motion model / reference keyframe / local map
+tracking (camera), relocalization."""

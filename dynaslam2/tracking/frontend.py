@@ -1,0 +1,95 @@
+"""From input images to a `Frame`: grey conversion, ORB on both images, stereo or RGB-D depth,
+instance labels under each keypoint, and the mode switch (static / masked / dynamic)."""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+
+from dynaslam2.classes import CLASS_IDS, DYNAMIC_CLASSES, instance_class_id
+from dynaslam2.config import SlamConfig
+from dynaslam2.errors import InputError
+from dynaslam2.features.orb import ORBExtractor, to_gray
+from dynaslam2.features.stereo import depth_from_image, match_stereo
+from dynaslam2.geometry.camera import StereoCamera
+from dynaslam2.io.types import FrameData
+from dynaslam2.map.frame import Frame
+
+DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
+
+
+def dynamic_mask(instances: np.ndarray, dilation_px: int) -> np.ndarray:
+    """HxW bool: pixels of dynamic-class instances, dilated by `dilation_px` (DynaSLAM's mask)."""
+    cls = instance_class_id(instances.astype(np.int64))
+    mask = np.isin(cls, DYNAMIC_CLASS_IDS).astype(np.uint8)
+    if dilation_px > 0 and mask.any():
+        k = 2 * dilation_px + 1
+        mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+    return mask.astype(bool)
+
+
+class FrameBuilder:
+    """Builds `Frame`s for one camera and config (ORB-SLAM2's Frame constructor)."""
+
+    def __init__(self, config: SlamConfig, camera: StereoCamera) -> None:
+        self.config = config
+        self.camera = camera
+        self.extractor = ORBExtractor(config.orb)
+        self.th_depth = config.stereo.th_depth_baselines * camera.baseline
+
+    def _check(self, data: FrameData) -> None:
+        shape = (self.camera.height, self.camera.width)
+        if data.left.shape[:2] != shape:
+            raise InputError(f"frame {data.index}: left image is {data.left.shape[1]}x{data.left.shape[0]}, "
+                             f"expected {shape[1]}x{shape[0]} from the calibration")
+        for name in ("right", "depth", "instances"):
+            img = getattr(data, name)
+            if img is not None and img.shape[:2] != data.left.shape[:2]:
+                raise InputError(f"frame {data.index}: {name} image is {img.shape[1]}x{img.shape[0]}, "
+                                 f"expected {shape[1]}x{shape[0]} like the left image")
+        if data.right is None and data.depth is None:
+            raise InputError(f"frame {data.index}: needs a right image or a depth image")
+
+    def build(self, data: FrameData, timing_ms: dict[str, float]) -> Frame:
+        """Extract and match features of `data`; adds `features` and `stereo` to `timing_ms`."""
+        self._check(data)
+        mode = self.config.mode
+        t0 = time.perf_counter()
+        dyn = None
+        if data.instances is not None and mode in ("masked", "dynamic"):
+            dyn = dynamic_mask(data.instances, self.config.tracking.mask_dilation_px)
+        pyr_l = self.extractor.build_pyramid(to_gray(data.left))
+        # masked: features on dynamic instances are never extracted, the budget goes to the rest (DynaSLAM).
+        kp = self.extractor.extract(pyr_l, mask=~dyn if (mode == "masked" and dyn is not None) else None)
+        use_depth = data.depth is not None and (data.right is None or self.config.tracking.use_depth_image)
+        if not use_depth:
+            pyr_r = self.extractor.build_pyramid(to_gray(data.right))
+            kp_r = self.extractor.extract(pyr_r)
+        t1 = time.perf_counter()
+        if use_depth:
+            u_right, depth = depth_from_image(kp, data.depth, self.camera)
+        else:
+            u_right, depth = match_stereo(kp, kp_r, pyr_l, pyr_r, self.camera, self.extractor.scale_factors,
+                                          self.config.stereo)
+        t2 = time.perf_counter()
+        n = len(kp)
+        col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
+        row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
+        if data.instances is not None:
+            instance_id = data.instances[row, col].astype(np.int64)
+            class_id = instance_class_id(instance_id)
+        else:
+            instance_id = np.zeros(n, dtype=np.int64)
+            class_id = np.zeros(n, dtype=np.int64)
+        static = np.ones(n, dtype=bool)
+        if mode == "dynamic" and dyn is not None:
+            static = ~dyn[row, col]
+        timing_ms["features"] = (t1 - t0) * 1e3
+        timing_ms["stereo"] = (t2 - t1) * 1e3
+        return Frame(
+            index=data.index, timestamp=data.timestamp, keypoints=kp,
+            u_right=np.asarray(u_right, dtype=np.float64), depth=np.asarray(depth, dtype=np.float64),
+            instance_id=instance_id, class_id=class_id, static=static, th_depth=self.th_depth,
+        )
