@@ -21,6 +21,7 @@ from dynaslam2.features import (
     match_stereo,
     search_by_projection,
 )
+from dynaslam2.features.matcher import rotation_consistent
 from dynaslam2.geometry.camera import StereoCamera
 
 KITTI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kitti-odometry-06"
@@ -89,6 +90,32 @@ def test_extraction_spreads_over_image_unlike_plain_orb(kitti_left):
     plain_fine = _occupied_fraction(plain_uv, img.shape, 16, skip_top_rows=2)
     assert ours_fine >= 0.9
     assert ours_fine > plain_fine + 0.1, (ours_fine, plain_fine)
+
+
+def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor):
+    """The candidates are exactly ORB-SLAM2's rule computed from one FAST pass at min_th_fast: a cell
+    keeps its corners scoring >= ini_th_fast, or all its corners where it has none."""
+    cfg = extractor.cfg
+    fast = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
+    _, pyr, _ = kitti_left
+    for level in (0, 3):
+        img = pyr[level]
+        h, w = img.shape
+        kps = fast.detect(img)
+        xy = cv2.KeyPoint.convert(kps)
+        score = np.array([k.response for k in kps], np.float32)
+        e = cfg.edge_threshold
+        inside = (xy[:, 0] >= e) & (xy[:, 0] < w - e) & (xy[:, 1] >= e) & (xy[:, 1] < h - e)
+        xy, score = xy[inside], score[inside]
+        n_cx, n_cy = (w - 2 * (e - 3)) // cfg.cell_size, (h - 2 * (e - 3)) // cfg.cell_size
+        cw, ch = int(np.ceil((w - 2 * (e - 3)) / n_cx)), int(np.ceil((h - 2 * (e - 3)) / n_cy))
+        cell = np.minimum((xy[:, 1].astype(int) - e) // ch, n_cy - 1) * n_cx + np.minimum((xy[:, 0].astype(int) - e) // cw, n_cx - 1)
+        strong = score >= cfg.ini_th_fast
+        keep = strong | ~np.isin(cell, cell[strong])
+        assert (~strong & keep).sum() > 0  # the test covers cells that fall back to min_th_fast
+        expected = {(x, y, s) for (x, y), s in zip(xy[keep].tolist(), score[keep].tolist())}
+        got_xy, got_score = extractor._detect(level, img, None)
+        assert {(x, y, s) for (x, y), s in zip(got_xy.tolist(), got_score.tolist())} == expected
 
 
 def test_extraction_deterministic(kitti_left, extractor):
@@ -269,6 +296,14 @@ def test_match_descriptors_recovers_permutation():
     m = match_descriptors(a, b, th=50, nn_ratio=0.8)
     assert len(m) == 200
     np.testing.assert_array_equal(perm[m[:, 1]], m[:, 0])
+
+
+def test_rotation_consistency_keeps_three_main_bins():
+    rng = np.random.default_rng(3)
+    rot = np.concatenate([rng.uniform(-5, 5, 100), rng.uniform(91, 101, 30), rng.uniform(-173, -163, 12), rng.uniform(0, 360, 5)])
+    keep = rotation_consistent(rot)
+    assert keep[:142].all()  # bins 0, 8 and 16 (12 degrees each, centred on multiples of 12)
+    assert not rotation_consistent(np.r_[np.full(100, 5.0), np.full(9, 180.0)])[100:].any()  # < 10% of the top
 
 
 def test_search_by_projection_recovers_shift(kitti_left, extractor):

@@ -43,13 +43,13 @@ def hamming_distance(desc_a: np.ndarray, desc_b: np.ndarray, chunk: int = 128) -
 
 def rotation_consistent(rot_deg: np.ndarray) -> np.ndarray:
     """Mask of the rotations in the 3 most populated of HISTO_LENGTH bins (ORB-SLAM2's ComputeThreeMaxima:
-    the 2nd/3rd bins count only when holding > 10% of the 1st)."""
+    the 2nd/3rd bins count only when holding >= 10% of the 1st)."""
     if len(rot_deg) == 0:
         return np.zeros(0, bool)
     bins = (np.rint(np.mod(rot_deg, 360.0) * HISTO_LENGTH / 360.0).astype(np.int64)) % HISTO_LENGTH
     counts = np.bincount(bins, minlength=HISTO_LENGTH)
     top = np.argsort(-counts, kind="stable")[:3]
-    keep_bins = [top[0]] + [b for b in top[1:] if counts[b] > 0.1 * counts[top[0]]]
+    keep_bins = [top[0]] + [b for b in top[1:] if counts[b] > 0 and counts[b] >= 0.1 * counts[top[0]]]
     return np.isin(bins, keep_bins)
 
 
