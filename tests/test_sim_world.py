@@ -200,7 +200,12 @@ def test_intrinsics_rule_from_rendered_depth():
     us, zs, ds = map(np.concatenate, (us, zs, ds))
     assert len(us) > 200
     A = np.column_stack([np.ones(len(us)), ds / zs])
-    cx_fit, fx_fit = np.linalg.lstsq(A, us, rcond=None)[0]
+    inliers = np.ones(len(us), bool)
+    for tol in (1.0, 0.25, 0.05):  # trim pixels of the buildings' end faces seen near their corners
+        cx_fit, fx_fit = np.linalg.lstsq(A[inliers], us[inliers], rcond=None)[0]
+        inliers = np.abs(A @ (cx_fit, fx_fit) - us) < tol
+    assert inliers.mean() > 0.7
+    cx_fit, fx_fit = np.linalg.lstsq(A[inliers], us[inliers], rcond=None)[0]
     assert abs(cx_fit - cx) < 0.1 and abs(fx_fit / fx - 1) < 1e-3
 
 
