@@ -1,9 +1,9 @@
 """Median ms of ORB pyramid + extraction (left and right) and stereo matching.
 
-    python benchmarks/bench_features.py [--repeat 15] [--right-factor 1.0]
+    python benchmarks/bench_features.py [--repeat 15] [--right-factor 1.0] [--cv-threads N]
 
 Images: the real KITTI odometry 06 pair (1226x370) from ../shared/data when present (else a synthetic
-textured pair), and the same pair resized to 640x480. Wall-clock medians and, in brackets, process CPU
+textured pair), and a rendered 640x480 frame of the simulated static street (else KITTI resized). Wall-clock medians and, in brackets, process CPU
 medians (both cores count): on a shared machine the CPU time is the steadier figure.
 Columns: pyramid (both images), extract (left then right, one thread), pair (extract_pair: right image
 in a worker thread), stereo (match_stereo), frame = pyramid + pair + stereo.
@@ -12,6 +12,7 @@ in a worker thread), stereo (match_stereo), frame = pyramid + pair + stereo.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -40,11 +41,31 @@ def _pairs() -> list[tuple[str, np.ndarray, np.ndarray, StereoCamera]]:
     fx, baseline = 707.09, 0.537
     h, w = left.shape
     kitti_cam = StereoCamera(fx, fx, w / 2, h / 2, baseline, w, h)
-    # 640x480: the same pair resized (rows stay rows, so it stays rectified).
-    left_vga = cv2.resize(left, (640, 480), interpolation=cv2.INTER_AREA)
-    right_vga = cv2.resize(right, (640, 480), interpolation=cv2.INTER_AREA)
-    vga_cam = StereoCamera(fx * 640 / w, fx * 480 / h, 320.0, 240.0, baseline, 640, 480)
-    return [(f"{source} {w}x{h}", left, right, kitti_cam), (f"{source} 640x480", left_vga, right_vga, vga_cam)]
+    return [(f"{source} {w}x{h}", left, right, kitti_cam), _vga_pair(left, right, fx, baseline)]
+
+
+def _vga_pair(left: np.ndarray, right: np.ndarray, fx: float, baseline: float):
+    """A rendered frame of the simulated static street at 640x480 when the simulator is available, else
+    the KITTI pair resized to 640x480 (rows stay rows, so it stays rectified)."""
+    try:
+        os.environ.setdefault("MUJOCO_GL", "egl")
+        from sim.render import StereoRenderer
+        from sim.scenarios import load_scenario
+        from sim.world import build_world, camera_intrinsics
+
+        cfg = load_scenario("static", ["frames=1", "image_size=640x480"])
+        world = build_world(cfg)
+        world.set_time(0.0)
+        intrinsics = camera_intrinsics(cfg)
+        with StereoRenderer(world, 640, 480) as renderer:
+            frame = renderer.render(world.ego_T_m_c(0.0), intrinsics)
+        camera = StereoCamera(*intrinsics, cfg.baseline, 640, 480)
+        return "sim static 640x480", cv2.cvtColor(frame.left, cv2.COLOR_RGB2GRAY), cv2.cvtColor(frame.right, cv2.COLOR_RGB2GRAY), camera
+    except ImportError:
+        h, w = left.shape
+        camera = StereoCamera(fx * 640 / w, fx * 480 / h, 320.0, 240.0, baseline, 640, 480)
+        resize = lambda img: cv2.resize(img, (640, 480), interpolation=cv2.INTER_AREA)  # noqa: E731
+        return "KITTI resized 640x480", resize(left), resize(right), camera
 
 
 def _median_ms(fn, repeat: int) -> tuple[float, float]:
@@ -62,7 +83,10 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=15)
     parser.add_argument("--n-features", type=int, default=2000)
     parser.add_argument("--right-factor", type=float, default=1.0, help="right-image budget / n_features")
+    parser.add_argument("--cv-threads", type=int, default=None, help="cv2.setNumThreads (default: OpenCV's)")
     args = parser.parse_args()
+    if args.cv_threads is not None:
+        cv2.setNumThreads(args.cv_threads)
     extractor = ORBExtractor(ORBConfig(n_features=args.n_features))
     n_right = int(round(args.n_features * args.right_factor))
     stereo_cfg = StereoConfig()
