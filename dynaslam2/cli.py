@@ -64,6 +64,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    from dynaslam2.runner import run_sequence
+
+    out = run_sequence(args.seq, args.mode, args.out, config_path=args.config, overrides=args.overrides,
+                       overwrite=args.overwrite, progress=not args.quiet)
+    if not args.quiet:
+        print(f"wrote results of '{args.mode}' mode to {out}")
+    return 0
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from dynaslam2.eval.report import evaluate, format_table, write_metrics
     from dynaslam2.io.results import METRICS_FILE
@@ -113,6 +123,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("run", help="run SLAM on a sequence and write the results files",
+                       description="Track the stereo/RGB-D sequence SEQ frame by frame and write RES/poses.txt, "
+                                   "RES/status.jsonl and RES/timing.csv (written as it goes).")
+    p.add_argument("seq", metavar="SEQ", help="sequence folder (ours, KITTI odometry or KITTI tracking)")
+    p.add_argument("--mode", required=True, choices=["dynamic", "masked", "static"],
+                   help="static: every feature; masked: no features on dynamic-class instances; "
+                        "dynamic: object tracking (not implemented yet)")
+    p.add_argument("--out", required=True, metavar="RES", help="results folder")
+    p.add_argument("--config", default=None, metavar="FILE", help="YAML file with SLAM config overrides")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a SLAM config value, e.g. --set tracking.min_inliers=40 (repeatable)")
+    p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty RES")
+    p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("eval", help="score a run's results against the sequence's ground truth",
                        description="Compare RES (written by `dynaslam2 run`) with the ground truth of SEQ: "
