@@ -60,10 +60,11 @@ def optimize_pose_builtin(T_c_w_init, X_w, meas, inv_sigma2, cfg: OptimConfig) -
         for key, X in zip(point_keys.tolist(), X_w[idx]):
             graph.addPriorPoint3(key, X, prior)
         robust = rnd < cfg.pose_robust_rounds
-        add_stereo_projection_factors(graph, np.zeros(len(idx), np.int64), point_keys, meas[idx], inv_sigma2[idx], CAMERA,
-                                      np.sqrt(cfg.chi2_mono) if robust else None,
+        add_stereo_projection_factors(graph, np.zeros(len(idx), np.int64), point_keys, meas[idx], inv_sigma2[idx],
+                                      CAMERA, np.sqrt(cfg.chi2_mono) if robust else None,
                                       np.sqrt(cfg.chi2_stereo) if robust else None)
-        params = lm_params(cfg, cfg.pose_iterations, cfg.pose_relative_error_tol, np.concatenate([point_keys, [pose_key]]))
+        ordering = np.concatenate([point_keys, [pose_key]])
+        params = lm_params(cfg, cfg.pose_iterations, cfg.pose_relative_error_tol, ordering)
         result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
         T_c_w = inverse(matrix_from_pose3(result.atPose3(int(pose_key))))
         X_c = transform(T_c_w, X_w)
@@ -85,7 +86,9 @@ def median_ms(fn, repeats: int) -> tuple[float, float, list]:
 def bench_window(rng: np.random.Generator, cfg: OptimConfig, repeats: int, n_points: int, mild: bool) -> None:
     """Local BA on 10 local + 5 fixed keyframes; `mild`: 1 cm / 0.06 deg / 2 cm initial errors (a window
     after tracking), else 5 cm / 0.3 deg / 5 cm."""
-    sigmas = dict(pose_sigma=(0.01, 0.001), point_sigma=0.02) if mild else dict(pose_sigma=(0.05, 0.005), point_sigma=0.05)
+    sigmas = dict(pose_sigma=(0.01, 0.001), point_sigma=0.02)
+    if not mild:
+        sigmas = dict(pose_sigma=(0.05, 0.005), point_sigma=0.05)
     window = make_window(rng, CAMERA, n_keyframes=15, n_fixed=5, n_points=n_points, track_length=7,
                          outlier_fraction=0.05, **sigmas)
     problem = BAProblem(window.T_c_w_init, window.fixed, window.X_w_init, window.obs_kf, window.obs_pt,

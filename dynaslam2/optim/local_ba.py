@@ -106,7 +106,8 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
             use = _determined(problem, (c2 <= th) & (depth > cfg.min_depth), stereo)
             # points no longer determined and free keyframes left without observations keep their estimate
             dropped_pt = np.setdiff1d(pt_idx, problem.obs_pt[use])
-            dropped_kf = np.setdiff1d(kf_idx, np.concatenate([problem.obs_kf[use], kf_idx[np.isin(pose_keys, fixed_keys)]]))
+            still_used = np.concatenate([problem.obs_kf[use], kf_idx[np.isin(kf_key[kf_idx], fixed_keys)]])
+            dropped_kf = np.setdiff1d(kf_idx, still_used)
             for key in np.concatenate([pt_key[dropped_pt], kf_key[dropped_kf]]).tolist():
                 values.erase(key)
             pt_idx = np.setdiff1d(pt_idx, dropped_pt)

@@ -32,9 +32,10 @@ def optimize_pose(
 
     Each of `cfg.pose_rounds` rounds runs `cfg.pose_iterations` LM steps on the current inliers, from
     the previous round's pose (from `T_c_w_init` with `cfg.pose_restart_rounds`, as ORB-SLAM2: same
-    result on the benchmark, twice the time), then re-tests every correspondence: chi2 > 7.815 (stereo) / 5.991 (mono) or a
-    point behind the camera is an outlier. Huber (delta = sqrt of the threshold) in the first
-    `cfg.pose_robust_rounds` rounds. Fewer than `cfg.pose_min_points` correspondences: init, all False.
+    result on the benchmark, twice the time), then re-tests every correspondence: chi2 > 7.815
+    (stereo) / 5.991 (mono) or a point behind the camera is an outlier. Huber (delta = sqrt of the
+    threshold) in the first `cfg.pose_robust_rounds` rounds. Fewer than `cfg.pose_min_points`
+    correspondences: init, all False.
     """
     T_c_w_init, X_w, meas, inv_sigma2 = _check_inputs(T_c_w_init, X_w, meas, inv_sigma2)
     n = len(X_w)
