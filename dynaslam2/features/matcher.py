@@ -72,14 +72,15 @@ def _pairs_in_radius(
         o_lo = np.zeros(len(uv_q), np.int64)
         o_hi = o_lo
         kp_oct = np.zeros(len(uv_kp), np.int64)
-    cell = float(np.clip(np.median(radius), 4.0, 64.0))
+    cell = float(np.clip(2.0 * np.median(radius), 4.0, 128.0))  # measured: ~2 radii per cell is fastest
     origin = uv_kp.min(axis=0) - 1.0
     kc = ((uv_kp - origin) / cell).astype(np.int64)
     n_cx = int(kc[:, 0].max()) + 1
     n_cy = int(kc[:, 1].max()) + 1
     key = (kc[:, 1] * n_cx + kc[:, 0]) * n_oct + kp_oct
     kp_order = np.argsort(key, kind="stable")
-    starts = np.searchsorted(key[kp_order], np.arange(n_cx * n_cy * n_oct + 1))
+    starts = np.zeros(n_cx * n_cy * n_oct + 1, np.int64)
+    np.cumsum(np.bincount(key, minlength=n_cx * n_cy * n_oct), out=starts[1:])
     # Cell ranges of each query square, clipped to the grid.
     lo = np.maximum(np.floor((uv_q - radius[:, None] - origin) / cell).astype(np.int64), 0)
     hi = np.minimum(np.floor((uv_q + radius[:, None] - origin) / cell).astype(np.int64), [n_cx - 1, n_cy - 1])
