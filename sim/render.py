@@ -33,6 +33,18 @@ _GEOM = int(mujoco.mjtObj.mjOBJ_GEOM)
 _NGROUP = 6  # mjNGROUP: geom groups 0..5
 
 
+def _gl_context_class():
+    """The GL context class for MUJOCO_GL (default egl), even when mujoco was imported before it was set."""
+    backend = os.environ.get("MUJOCO_GL", "egl").lower()
+    if backend == "egl":
+        from mujoco.egl import GLContext
+    elif backend == "osmesa":
+        from mujoco.osmesa import GLContext
+    else:
+        GLContext = mujoco.GLContext
+    return GLContext
+
+
 @dataclass(frozen=True)
 class RenderConfig:
     """Rendering quality knobs.
@@ -211,7 +223,7 @@ class StereoRenderer:
         model.vis.quality.offsamples = int(self.config.msaa_samples)
         model.vis.quality.numslices = int(self.config.mesh_slices)
         model.vis.quality.numstacks = int(self.config.mesh_stacks)
-        self._gl = mujoco.GLContext(self.width, self.height)
+        self._gl = _gl_context_class()(self.width, self.height)
         self._gl.make_current()
         self._ctx = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._ctx)
