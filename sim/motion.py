@@ -418,6 +418,10 @@ def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: f
             x_nb, y_nb, _ = nb.trajectory.pose(0.0)
             side = float(np.sign(y_nb))
             x = float(x_nb) + rng.choice([-1.0, 1.0]) * (0.5 * (nb.dims[0] + dims[0]) + rng.uniform(0.7, 1.6))
+        elif layout.x_int is not None and rng.random() < cfg.occlusion:  # at the corners, hiding the crossing
+            side = -1.0 if rng.random() < 0.5 else 1.0
+            near = layout.cross_half + cfg.sidewalk_width + 0.5 * dims[0] + 2.5
+            x = layout.x_int + rng.choice([-1.0, 1.0]) * rng.uniform(near, near + 20.0)
         else:
             side = -1.0 if rng.random() < 0.5 else 1.0
             x = rng.uniform(-10.0, min(layout.x_hi - 10.0, ego_end + 70.0))
@@ -508,7 +512,8 @@ def _plan_followers(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Tr
     """`following`: a platoon ahead in the ego lane driving the ego's speed profile earlier (Newell,
     never slower than the ego) and vehicles in the next lane at a similar speed."""
     k = cfg.object_speed
-    n_lane = n if cfg.lanes_per_direction == 1 else min(2, n)
+    dense = 1.0 - 0.7 * cfg.occlusion  # occlusion shortens the gaps and lengthens the ego-lane platoon
+    n_lane = n if cfg.lanes_per_direction == 1 else min(1 + int(round(2 * cfg.occlusion)), n)
     ahead = [ego]
     front = EGO_DIMS[0]
     lead_is_ego = [True]
@@ -517,7 +522,7 @@ def _plan_followers(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Tr
             cls = _moving_class(rng)
             dims = _dims(rng, cls)
             clearance = EGO_CLEARANCE + 0.5 if lead_is_ego[0] else 0.0
-            gap = 0.5 * (front + dims[0]) + clearance + rng.uniform(2.0, 6.0)
+            gap = 0.5 * (front + dims[0]) + clearance + dense * rng.uniform(2.0, 6.0)
             lead = ahead[-1]
             return cls, dims, Trajectory(lead.path, ego.speed.scaled(max(k, 1.0)), lead.s0 + gap,
                                          lead.tau - rng.uniform(0.3, 0.8))
@@ -535,7 +540,7 @@ def _plan_followers(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Tr
             cls = _moving_class(rng)
             dims = _dims(rng, cls)
             if last:
-                gap = 0.5 * (last[0].dims[0] + dims[0]) + rng.uniform(4.0, 12.0)
+                gap = 0.5 * (last[0].dims[0] + dims[0]) + dense * rng.uniform(4.0, 12.0)
                 return cls, dims, last[0].trajectory.follower(rng.uniform(0.5, 1.5), gap)
             prof = ego.speed.scaled(k * rng.uniform(0.95, 1.05))
             return cls, dims, Trajectory(Path.build(rng.uniform(5.0, 30.0), y, 0.0, [("straight", 1.0)]), prof,
@@ -569,9 +574,9 @@ def _plan_cross_traffic(cfg, layout: StreetLayout, rng: np.random.Generator, n: 
         def make():
             cls = _moving_class(rng)
             dims = _dims(rng, cls)
-            if stream in last and rng.random() < 0.6:
+            if stream in last and rng.random() < 0.3 + 0.6 * cfg.occlusion:
                 prev = last[stream]
-                gap = 0.5 * (prev.dims[0] + dims[0]) + rng.uniform(3.0, 8.0)
+                gap = 0.5 * (prev.dims[0] + dims[0]) + (1.0 - 0.7 * cfg.occlusion) * rng.uniform(3.0, 8.0)
                 return cls, dims, prev.trajectory.follower(rng.uniform(0.8, 1.6), gap)
             prof = stop_and_go_profile(rng, rng.uniform(6.0, 11.0) * k, duration, stop_prob=0.1)
             t_cross = rng.uniform(-0.1, 0.9) * duration  # when it reaches the main street
@@ -620,8 +625,15 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
         y = side * rng.uniform(sw_in + 0.8, sw_out - 0.6)
         return "pedestrian", dims, static_trajectory(sidewalk_x(), y, rng.uniform(-np.pi, np.pi))
 
+    crossers: list[PlannedActor] = []
+
     def crossing():
         dims = _dims(rng, "pedestrian")
+        if crossers and rng.random() < 0.6 * cfg.occlusion:  # walk with the last crosser, a step aside
+            base = crossers[-1].trajectory
+            path = Path.build(base.path.x[0] + rng.choice([-1.0, 1.0]) * rng.uniform(0.7, 1.1), base.path.y[0],
+                              base.path.heading[0], [("straight", 1.0)])
+            return "pedestrian", dims, Trajectory(path, base.speed, base.s0 - rng.uniform(-0.4, 0.4), base.tau)
         v = max(rng.uniform(1.2, 1.6) * k, 1e-3)
         if layout.x_int is not None:
             x = layout.x_int + (-1 if rng.random() < 0.6 else 1) * (layout.cross_half + 2.0) + rng.uniform(-1, 1)
@@ -633,8 +645,7 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
         t1 = t0 + length / v + 0.8
         prof = SpeedProfile.of([(t0, 0.0), (t0 + 0.8, v), (t1 - 0.8, v), (t1, 0.0)])
         heading = -side * np.pi / 2
-        return "pedestrian", dims, Trajectory(Path.build(x + rng.uniform(-0.5, 0.5), y0, heading, [("straight", 1.0)]),
-                                              prof)
+        return "pedestrian", dims, Trajectory(Path.build(x, y0, heading, [("straight", 1.0)]), prof)
 
     def walking():
         dims = _dims(rng, "pedestrian")
@@ -647,6 +658,9 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
     for i in range(n):
         if i < n_standing:
             try_add(standing, margin=0.3)
-        else:
-            try_add(crossing if (i - n_standing) % 2 == 0 or layout.x_int is not None and i % 3 else walking,
-                    margin=0.3)
+            continue
+        # the intersection layout sends two of three movers over the crosswalks, the street one of two
+        cross = (i - n_standing) % 3 != 2 if layout.x_int is not None else (i - n_standing) % 2 == 0
+        added = try_add(crossing if cross else walking, margin=0.3)
+        if added is not None and cross:
+            crossers.append(added)
