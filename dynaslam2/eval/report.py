@@ -5,6 +5,9 @@
 - ego.rpe_t_m_per_frame / ego.rpe_r_deg_per_frame: RMSE (evo's headline statistic) of the relative
   translation (m) and rotation (deg) errors over the consecutive frame pairs (i, i+1).
 - ego.frames: frames scored; ego.lost_frames: frames whose status state is "lost".
+- objects.*: only when the run wrote objects (objects.jsonl, the `dynamic` mode) and the sequence has
+  GT objects in some frame; definitions in eval/objects.py (per-track ATE/RPE after a per-track
+  frame offset, TP ratio, id switches; GT tracks within 30 m).
 - timing.median_ms.<stage>: median over the frames of each stage of timing.csv;
   timing.fps = 1000 / median total ms (null when the median total is 0).
 """
@@ -18,14 +21,17 @@ from pathlib import Path
 import numpy as np
 
 from dynaslam2.errors import InputError
+from dynaslam2.eval.objects import ObjectEvalConfig, evaluate_object_tracks
 from dynaslam2.eval.trajectory import ate, rpe
 from dynaslam2.io.atomic import write_text_atomic
 from dynaslam2.io.results import POSES_FILE, read_results
 from dynaslam2.io.sequence import open_sequence
 
 
-def evaluate(seq_path: str | os.PathLike, res_path: str | os.PathLike) -> dict:
-    """Nested metrics dict of a results folder `res_path` scored against the sequence `seq_path`."""
+def evaluate(seq_path: str | os.PathLike, res_path: str | os.PathLike,
+             object_config: ObjectEvalConfig = ObjectEvalConfig()) -> dict:
+    """Nested metrics dict of a results folder `res_path` scored against the sequence `seq_path`
+    (`object_config`: the thresholds of the objects section)."""
     seq_path, res_path = Path(seq_path), Path(res_path)
     results = read_results(res_path)
     seq = open_sequence(seq_path)
@@ -40,7 +46,7 @@ def evaluate(seq_path: str | os.PathLike, res_path: str | os.PathLike) -> dict:
     ate_m = ate(results.T_w_c, T_gt, align="se3")
     rpe_1 = rpe(results.T_w_c, T_gt, delta=1)
     total_ms = float(np.median(results.timing["total"]))
-    return {
+    metrics = {
         "ego": {
             "ate_rmse_m": ate_m["rmse_m"],
             "rpe_t_m_per_frame": rpe_1["t_rmse_m"],
@@ -48,11 +54,17 @@ def evaluate(seq_path: str | os.PathLike, res_path: str | os.PathLike) -> dict:
             "frames": len(results),
             "lost_frames": sum(s["state"] == "lost" for s in results.status),
         },
-        "timing": {
-            "median_ms": {stage: float(np.median(ms)) for stage, ms in results.timing.items()},
-            "fps": 1000.0 / total_ms if total_ms > 0.0 else None,
-        },
     }
+    if results.has_objects:
+        gt_objects = [seq.gt_objects(i) for i in range(len(seq))]
+        if any(gt_objects):
+            metrics["objects"] = evaluate_object_tracks(gt_objects, T_gt, seq.timestamps, results.objects,
+                                                        results.T_w_c, object_config)
+    metrics["timing"] = {
+        "median_ms": {stage: float(np.median(ms)) for stage, ms in results.timing.items()},
+        "fps": 1000.0 / total_ms if total_ms > 0.0 else None,
+    }
+    return metrics
 
 
 def _flatten(tree: dict, prefix: str = "") -> list[tuple[str, object]]:
