@@ -33,6 +33,7 @@ class GenerationStats:
     stage_ms: dict[str, list[float]] = field(default_factory=dict)
     setup_s: float = 0.0
     loop_s: float = 0.0
+    loop_cpu_s: float = 0.0  # CPU time of all threads of the process (GL rasterizer threads included)
     frames: int = 0
 
     def add(self, stage: str, ms: float) -> None:
@@ -94,6 +95,7 @@ def generate_sequence(
     with SequenceWriter(out, camera, meta, overwrite=overwrite, with_depth=cfg.depth) as writer, \
             StereoRenderer(world, width, height, render_cfg) as renderer, \
             ThreadPoolExecutor(max_workers=1, thread_name_prefix="sequence-writer") as pool:
+        renderer.ensure_context()
         stats.setup_s = time.perf_counter() - t_setup
 
         def write(frame: FrameData, T_w_c: np.ndarray, objects: list) -> None:
@@ -102,7 +104,7 @@ def generate_sequence(
             stats.add("write", (time.perf_counter() - t0) * 1e3)
 
         pending: Future | None = None
-        t_loop = time.perf_counter()
+        t_loop, cpu_loop = time.perf_counter(), time.process_time()
         bar = tqdm(total=cfg.frames, desc=f"simulate {cfg.name}", unit="frame", disable=not progress, leave=False)
         try:
             for i in range(cfg.frames):
@@ -126,6 +128,7 @@ def generate_sequence(
         finally:
             bar.close()
         stats.loop_s = time.perf_counter() - t_loop
+        stats.loop_cpu_s = time.process_time() - cpu_loop
         stats.frames = cfg.frames
     if preview:
         from sim.preview import write_preview

@@ -214,7 +214,8 @@ class StereoRenderer:
         self._rect = mujoco.MjrRect(0, 0, self.width, self.height)
 
     # -- GL resources -------------------------------------------------------------------------
-    def _ensure_context(self) -> None:
+    def ensure_context(self) -> None:
+        """Create the GL context and upload the model (textures, meshes) now; render() calls this lazily."""
         if self._ctx is not None:
             return
         model = self.world.model
@@ -379,7 +380,7 @@ class StereoRenderer:
         T_m_c: left camera pose in the MuJoCo world (OpenCV axes), used to project actor boxes;
         intrinsics: (fx, fy, cx, cy) of the rendered images.
         """
-        self._ensure_context()
+        self.ensure_context()
         t0 = time.perf_counter()
         self._update(self.world.camera_left, self._option)
         left = self._colour()
