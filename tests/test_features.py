@@ -339,3 +339,9 @@ def test_search_by_projection_recovers_shift(kitti_left, extractor):
     available[idx[found]] = False
     idx_av = search_by_projection(kp2, uv_proj, kp.desc, radius, octave_range, None, None, 100, 0.9, False, available=available)
     assert not np.any(np.isin(idx_av[idx_av >= 0], idx[found]))
+    # Non-finite projections (points behind the camera) match nothing and do not warn.
+    uv_bad = uv_proj.copy()
+    uv_bad[:5] = np.nan
+    with np.errstate(all="raise"):
+        idx_bad = search_by_projection(kp2, uv_bad, kp.desc, radius, octave_range, None, None, 100, 0.9, False)
+    assert np.all(idx_bad[:5] == -1)

@@ -167,6 +167,10 @@ def search_by_projection(
         return result
     uv_proj = np.asarray(uv_proj, np.float64)
     radius = np.broadcast_to(np.asarray(radius, np.float64), (M,))
+    finite = np.isfinite(uv_proj).all(axis=1) & np.isfinite(radius)
+    if not finite.all():  # non-finite projections match nothing
+        uv_proj = np.where(finite[:, None], uv_proj, 0.0)
+        radius = np.where(finite, radius, 0.0)
     if octave_range is not None:
         octave_range = np.asarray(octave_range)
     q, k = _pairs_in_radius(kp.uv.astype(np.float64), uv_proj, radius, kp.octave, octave_range)
