@@ -364,11 +364,20 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
         fp.add(static_trajectory(p.x, p.y, 0.0), p.length, p.width)
     actors: list[PlannedActor] = []
 
+    def inside(traj: Trajectory) -> bool:
+        """Within the modelled streets at every sample time (never drives into the end walls)."""
+        x, y, _ = traj.pose(times)
+        ok = (x > layout.x_lo - 25.0) & (x < layout.x_hi + 25.0) & (np.abs(y) < layout.sidewalk_outer)
+        if layout.x_int is not None:
+            ok |= (np.abs(x - layout.x_int) < layout.cross_half) & (np.abs(y) < layout.kerb + 90.0)
+        return bool(ok.all())
+
     def try_add(make, tries: int = 40, margin: float = 0.5, valid=None) -> PlannedActor | None:
-        """Draw candidates from `make()` until one is `valid` and overlaps nothing planned so far; None if all fail."""
+        """Draw candidates from `make()` until one is `valid`, stays in the streets and overlaps nothing
+        planned so far; None if all fail."""
         for _ in range(tries):
             cls, dims, traj = make()
-            if (valid is None or valid(traj)) and not fp.collides(traj, dims[0], dims[1], margin):
+            if (valid is None or valid(traj)) and inside(traj) and not fp.collides(traj, dims[0], dims[1], margin):
                 fp.add(traj, dims[0], dims[1])
                 actors.append(PlannedActor(cls, dims, traj))
                 return actors[-1]
@@ -634,17 +643,19 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
             path = Path.build(base.path.x[0] + rng.choice([-1.0, 1.0]) * rng.uniform(0.7, 1.1), base.path.y[0],
                               base.path.heading[0], [("straight", 1.0)])
             return "pedestrian", dims, Trajectory(path, base.speed, base.s0 - rng.uniform(-0.4, 0.4), base.tau)
-        v = max(rng.uniform(1.2, 1.6) * k, 1e-3)
+        v = rng.uniform(1.2, 1.6) * k
         if layout.x_int is not None:
             x = layout.x_int + (-1 if rng.random() < 0.6 else 1) * (layout.cross_half + 2.0) + rng.uniform(-1, 1)
         else:
             x = rng.uniform(10.0, max(20.0, ego_end + 50.0))
         side = -1.0 if rng.random() < 0.5 else 1.0
         y0, length = side * (layout.kerb + 1.0), 2.0 * (layout.kerb + 1.0)
-        t0 = rng.uniform(-0.4 * length / v if v > 0.1 else 0.0, 0.8 * duration)
+        heading = -side * np.pi / 2
+        if v <= 0.0:  # object_speed 0: waits at the kerb
+            return "pedestrian", dims, static_trajectory(x, y0, heading)
+        t0 = rng.uniform(-0.4 * length / v, 0.8 * duration)
         t1 = t0 + length / v + 0.8
         prof = SpeedProfile.of([(t0, 0.0), (t0 + 0.8, v), (t1 - 0.8, v), (t1, 0.0)])
-        heading = -side * np.pi / 2
         return "pedestrian", dims, Trajectory(Path.build(x, y0, heading, [("straight", 1.0)]), prof)
 
     def walking():

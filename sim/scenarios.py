@@ -6,7 +6,8 @@ image centre `((W-1)/2, (H-1)/2)` (MuJoCo 4.0 convention, pinned by a test).
 
 Speed rule: `object_speed` multiplies every moving object's nominal speed (vehicles ~7-14 m/s,
 pedestrians ~1.2-1.6 m/s). Vehicles that follow the ego in its own lane (`following`) never drive
-slower than the ego (scale max(object_speed, 1)) so they are not run over.
+slower than the ego (scale max(object_speed, 1)) so they are not run over. `object_speed=0`
+freezes every other object (those ego-lane leaders excepted) where it is at t = 0.
 
 `parked_fraction` is the fraction of vehicles (and of pedestrians) that never move.
 `occlusion` (0..1) raises the share of large parked vehicles, packs parked vehicles tighter,

@@ -214,3 +214,21 @@ def test_fx_overrides_fovy():
     fx, fy, cx, cy = camera_intrinsics(cfg)
     assert fx == pytest.approx(718.856) and fy == pytest.approx(718.856)
     assert (cx, cy) == (620.5, 187.0)
+
+
+@pytest.mark.parametrize("name,knobs", [
+    ("traffic", ["n_vehicles=0", "n_pedestrians=0"]),
+    ("crossing", ["lanes_per_direction=1", "object_speed=0", "ego_speed=0"]),
+    ("following", ["lanes_per_direction=3", "parked_fraction=0", "occlusion=1", "fps=30", "frames=1"]),
+    ("static", ["texture=poor", "depth=false", "fx=80", "n_vehicles=60"]),
+])
+def test_knob_extremes_build_and_move(name, knobs):
+    w = build_world(load_scenario(name, ["image_size=64x48", "texture_px=32", "view_ahead=40", "frames=8"] + knobs))
+    w.set_time(0.35)  # between frames: evaluated, not looked up
+    for a, (T_m_o, v, om) in zip(w.actors, w.actor_states(0.35)):
+        np.testing.assert_allclose(w.data.xpos[a.body_id], T_m_o[:3, 3], atol=1e-9)
+        assert np.all(np.isfinite(v)) and np.all(np.isfinite(om))
+    if "object_speed=0" in knobs:
+        assert all(a.parked for a in w.actors)
+    if "n_vehicles=0" in knobs:
+        assert w.actors == []
