@@ -98,10 +98,6 @@ class Path:
         k = np.concatenate(kappa)
         return _integrate(x0, y0, heading0, k)
 
-    @property
-    def length(self) -> float:
-        return float(self.s[-1])
-
     def pose(self, s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(x, y, heading) at arc lengths s (cubic Hermite in x, y with the exact unit tangents)."""
         s = np.asarray(s, float)
@@ -359,7 +355,7 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
     times = np.arange(0.0, max(duration, 0.05) + 1e-9, 0.05)
     fp = Footprints(times)
     fp.add(ego, EGO_DIMS[0] + 2 * EGO_CLEARANCE, EGO_DIMS[1])
-    props = _plan_props(cfg, layout, rng_prop, ego_end)
+    props = _plan_props(cfg, layout, rng_prop)
     for p in props:
         fp.add(static_trajectory(p.x, p.y, 0.0), p.length, p.width)
     actors: list[PlannedActor] = []
@@ -390,7 +386,7 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
     return MotionPlan(layout, ego, tuple(actors), tuple(props))
 
 
-def _plan_props(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float) -> list[Prop]:
+def _plan_props(cfg, layout: StreetLayout, rng: np.random.Generator) -> list[Prop]:
     """Kerbside furniture; `occlusion` shortens the spacing and favours hedges and kiosks (which hide
     parked vehicles and pedestrians) over thin poles and trees."""
     occ = cfg.occlusion
@@ -454,7 +450,6 @@ def _moving_class(rng: np.random.Generator) -> str:
 def _plan_moving(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Trajectory, ego_end: float,
                  n: int, try_add) -> None:
     """Moving vehicles: lane platoons (Newell followers), ego-lane leaders, crossing and turning traffic."""
-    duration, k = cfg.duration, cfg.object_speed
     n_cross = 0
     if cfg.layout == "intersection":
         n_cross = int(round(0.65 * n))
@@ -576,7 +571,7 @@ def _plan_cross_traffic(cfg, layout: StreetLayout, rng: np.random.Generator, n: 
     x_int, lw, k, duration = layout.x_int, layout.lane_width, cfg.object_speed, cfg.duration
     streams = [(x_int + 0.5 * lw, np.pi / 2), (x_int - 0.5 * lw, -np.pi / 2)]
     last: dict[int, PlannedActor] = {}
-    for i in range(n):
+    for _ in range(n):
         stream = int(rng.integers(2))
         x_lane, heading = streams[stream]
 
@@ -606,11 +601,10 @@ def _plan_cross_traffic(cfg, layout: StreetLayout, rng: np.random.Generator, n: 
 
 
 def _time_to_travel(prof: SpeedProfile, distance: float) -> float:
-    """First time t >= 0 at which prof.distance(t) reaches `distance` (coarse grid + linear interpolation)."""
-    t = np.linspace(0.0, 600.0, 60001)
-    d = prof.distance(t)
-    i = int(np.searchsorted(d, distance))
-    return float(t[min(i, len(t) - 1)])
+    """First time t in [0, 300] s at which prof.distance(t) reaches `distance` (0.01 s grid); 300 if never."""
+    t = np.arange(0.0, 300.0, 0.01)
+    i = int(np.searchsorted(prof.distance(t), distance))
+    return float(t[i]) if i < len(t) else 300.0
 
 
 def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, try_add) -> None:

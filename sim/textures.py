@@ -167,19 +167,6 @@ def asphalt(rng: np.random.Generator, width_m: float, length_m: float, line_ys: 
     return _finish(img, rich)
 
 
-def crosswalk(rng: np.random.Generator, width_m: float, length_m: float, px_per_m: float = 24.0,
-              max_px: int = 512, rich: bool = True) -> np.ndarray:
-    """Asphalt with zebra stripes across the road (stripes run along y, spaced along x)."""
-    img = asphalt(rng, width_m, length_m, [], [], px_per_m, max_px, rich=True).astype(np.float32)
-    h, w = img.shape[:2]
-    sx = w / length_m
-    x = 0.3
-    while x + 0.5 < length_m:
-        img[:, int(x * sx):int((x + 0.5) * sx)] = 220 * (0.85 + 0.15 * value_noise(rng, h, 1, 3, 4))[..., None]
-        x += 1.0
-    return _finish(img, rich)
-
-
 def sidewalk(rng: np.random.Generator, width_m: float, length_m: float, px_per_m: float = 24.0,
              max_px: int = 512, rich: bool = True) -> np.ndarray:
     """Paving slabs with jittered joints and per-slab tint."""

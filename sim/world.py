@@ -276,6 +276,7 @@ def _add_intersection(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Gene
 
 def _add_buildings(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generator, x0: float, x1: float) -> None:
     wb = b.spec.worldbody
+    forecourt = b.material(None, rgba=(0.55, 0.53, 0.5, 1))
     for side in (-1, 1):
         x = x0
         while x < x1:
@@ -296,9 +297,9 @@ def _add_buildings(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generat
             b.box(wb, ((a + c) / 2, yc, height / 2), (width / 2, depth / 2, height / 2), mat)
             if setback > 0.05:  # forecourt pavement up to the facade
                 b.box(wb, ((a + c) / 2, side * (lay.sidewalk_outer + setback / 2), 0.07),
-                      (width / 2, setback / 2, 0.07), b.material(None, rgba=(0.55, 0.53, 0.5, 1)))
+                      (width / 2, setback / 2, 0.07), forecourt)
     span = lay.sidewalk_outer + 15.0
-    for xe, sgn in ((x0 - 8.0, 1), (x1 + 8.0, -1)):  # end walls closing the street
+    for xe in (x0 - 8.0, x1 + 8.0):  # end walls closing the street
         height = rng.uniform(12.0, 25.0)
         mat = b.material(tex.facade(rng, 2 * span, height, max_px=2 * b.px, rich=b.rich))
         b.box(wb, (xe, 0.0, height / 2), (8.0, span, height / 2), mat)

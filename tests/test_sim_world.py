@@ -232,3 +232,23 @@ def test_knob_extremes_build_and_move(name, knobs):
         assert all(a.parked for a in w.actors)
     if "n_vehicles=0" in knobs:
         assert w.actors == []
+
+
+def test_motion_primitives_are_exact():
+    from sim.motion import Path, SpeedProfile, Trajectory
+
+    prof = SpeedProfile.of([(0.0, 10.0), (2.0, 0.0), (4.0, 0.0), (6.0, 5.0)])
+    t = np.linspace(-1.0, 8.0, 9001)
+    np.testing.assert_allclose(np.gradient(prof.distance(t), t)[1:-1], prof.speed(t)[1:-1], atol=1e-4)
+    assert prof.distance(6.0) == pytest.approx(10.0 + 0.0 + 5.0)  # smoothstep ramps average the speeds
+    turn = Path.build(0.0, 0.0, 0.0, [("straight", 5.0), ("turn", 12.0, np.pi / 2), ("straight", 5.0)])
+    assert turn.heading[-1] == pytest.approx(np.pi / 2, abs=1e-9)
+    shift = Path.build(0.0, -1.75, 0.0, [("straight", 5.0), ("shift", 40.0, 3.5), ("straight", 5.0)])
+    assert shift.y[-1] == pytest.approx(1.75, abs=1e-3) and shift.heading[-1] == pytest.approx(0.0, abs=1e-9)
+    lead = Trajectory(turn, prof)
+    follower = lead.follower(delay=1.0, gap=8.0)
+    s_lead, s_f = lead.arc(t), follower.arc(t)
+    np.testing.assert_allclose(s_f[1000:], s_lead[:-1000] - 8.0, atol=1e-9)  # Newell: s_f(t) = s(t - 1) - 8
+    vx, vy, wz = lead.velocity(np.array([3.0, 5.5]))
+    # |v| equals the profile speed up to the path interpolation (arc length exact to ~1e-5 relative)
+    np.testing.assert_allclose(np.hypot(vx, vy), prof.speed(np.array([3.0, 5.5])), rtol=1e-4, atol=1e-9)
