@@ -92,46 +92,53 @@ def generate_sequence(
     camera = StereoCamera(*intrinsics, float(cfg.baseline), width, height)
     gt = GroundTruth(world, camera, gt_cfg)
     meta = sequence_meta(cfg, render_cfg, gt_cfg)
-    with SequenceWriter(out, camera, meta, overwrite=overwrite, with_depth=cfg.depth) as writer, \
-            StereoRenderer(world, width, height, render_cfg) as renderer, \
-            ThreadPoolExecutor(max_workers=1, thread_name_prefix="sequence-writer") as pool:
-        renderer.ensure_context()
+    renderer = StereoRenderer(world, width, height, render_cfg)
+    with renderer:
+        renderer.ensure_context()  # a GL failure must not leave a half-written folder
         stats.setup_s = time.perf_counter() - t_setup
-
-        def write(frame: FrameData, T_w_c: np.ndarray, objects: list) -> None:
-            t0 = time.perf_counter()
-            writer.write_frame(frame, T_w_c, objects)
-            stats.add("write", (time.perf_counter() - t0) * 1e3)
-
-        pending: Future | None = None
-        t_loop, cpu_loop = time.perf_counter(), time.process_time()
-        bar = tqdm(total=cfg.frames, desc=f"simulate {cfg.name}", unit="frame", disable=not progress, leave=False)
-        try:
-            for i in range(cfg.frames):
-                t = i / cfg.fps
-                world.set_time(t)
-                T_w_c, T_m_c = gt.camera_pose(t)
-                rendered = renderer.render(T_m_c, intrinsics, right=True, depth=cfg.depth)
-                t0 = time.perf_counter()
-                objects = gt.objects(t, T_w_c, rendered.visible_px, rendered.amodal_px, rendered.box2d)
-                stats.add("gt", (time.perf_counter() - t0) * 1e3)
-                for stage, ms in rendered.timings_ms.items():
-                    stats.add(stage, ms)
-                frame = FrameData(index=i, timestamp=t, left=rendered.left, right=rendered.right,
-                                  depth=rendered.depth, instances=rendered.instances)
-                if pending is not None:
-                    pending.result()  # at most one frame in flight; re-raises a write error
-                pending = pool.submit(write, frame, T_w_c, objects)
-                bar.update(1)
-            if pending is not None:
-                pending.result()
-        finally:
-            bar.close()
-        stats.loop_s = time.perf_counter() - t_loop
-        stats.loop_cpu_s = time.process_time() - cpu_loop
-        stats.frames = cfg.frames
+        with SequenceWriter(out, camera, meta, overwrite=overwrite, with_depth=cfg.depth) as writer, \
+                ThreadPoolExecutor(max_workers=1, thread_name_prefix="sequence-writer") as pool:
+            _frame_loop(cfg, world, renderer, gt, intrinsics, writer, pool, progress, stats)
     if preview:
         from sim.preview import write_preview
 
         write_preview(out, progress=progress)
     return out
+
+
+def _frame_loop(cfg: ScenarioConfig, world, renderer: StereoRenderer, gt: GroundTruth, intrinsics: tuple,
+                writer: SequenceWriter, pool: ThreadPoolExecutor, progress: bool, stats: GenerationStats) -> None:
+    """Render, compute GT and hand each frame to the writer thread (one frame in flight)."""
+
+    def write(frame: FrameData, T_w_c: np.ndarray, objects: list) -> None:
+        t0 = time.perf_counter()
+        writer.write_frame(frame, T_w_c, objects)
+        stats.add("write", (time.perf_counter() - t0) * 1e3)
+
+    pending: Future | None = None
+    t_loop, cpu_loop = time.perf_counter(), time.process_time()
+    bar = tqdm(total=cfg.frames, desc=f"simulate {cfg.name}", unit="frame", disable=not progress, leave=False)
+    try:
+        for i in range(cfg.frames):
+            t = i / cfg.fps
+            world.set_time(t)
+            T_w_c, T_m_c = gt.camera_pose(t)
+            rendered = renderer.render(T_m_c, intrinsics, right=True, depth=cfg.depth)
+            t0 = time.perf_counter()
+            objects = gt.objects(t, T_w_c, rendered.visible_px, rendered.amodal_px, rendered.box2d)
+            stats.add("gt", (time.perf_counter() - t0) * 1e3)
+            for stage, ms in rendered.timings_ms.items():
+                stats.add(stage, ms)
+            frame = FrameData(index=i, timestamp=t, left=rendered.left, right=rendered.right,
+                              depth=rendered.depth, instances=rendered.instances)
+            if pending is not None:
+                pending.result()  # at most one frame in flight; re-raises a write error
+            pending = pool.submit(write, frame, T_w_c, objects)
+            bar.update(1)
+        if pending is not None:
+            pending.result()
+    finally:
+        bar.close()
+    stats.loop_s = time.perf_counter() - t_loop
+    stats.loop_cpu_s = time.process_time() - cpu_loop
+    stats.frames = cfg.frames
