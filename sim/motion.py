@@ -314,7 +314,7 @@ def _ego_profile(cfg, rng: np.random.Generator, duration: float) -> SpeedProfile
     if cfg.layout == "intersection":  # brake to a stop at the stop line, wait, go
         t_b = 0.15 * duration
         t_s = t_b + max(2.0, v / 2.5)
-        t_g = t_s + max(2.0, 0.3 * duration)
+        t_g = t_s + min(max(2.0, 0.3 * duration), 8.0)
         return SpeedProfile.of([(t_b, v), (t_s, 0.0), (t_g, 0.0), (t_g + max(2.5, v / 2.0), v)])
     knots, t = [(0.0, v)], 0.0
     while t < duration + 3.0:
