@@ -108,6 +108,8 @@ class TrackingConfig:
     # Tracking is good with at least this many inliers after local-map tracking (50 after relocalization).
     min_inliers: int = 30
     min_inliers_relocalized: int = 50
+    # ... and at least this fraction of the last frame's inliers (a sudden collapse = a jump).
+    min_inlier_ratio_to_last: float = 0.2
     # Keyframe insertion (ORB-SLAM2's NeedNewKeyFrame; max_frames defaults to the frame rate).
     min_frames: int = 0
     max_frames: int = 10
@@ -158,8 +160,12 @@ class MappingConfig:
     # Keyframe culling: redundant if this fraction of its close points is seen by >= N other keyframes.
     kf_cull_redundancy: float = 0.9
     kf_cull_observers: int = 3
-    # Local BA: window of covisible keyframes around the new one.
+    # Local BA: window of covisible keyframes around the new one, and at most this many fixed
+    # keyframes (those outside the window that see the most window points).
     ba_max_keyframes: int = 20
+    ba_max_fixed_keyframes: int = 10
+    # Points in the BA problem need this many observing keyframes (1 = all, as ORB-SLAM2).
+    ba_min_views: int = 2
 
     def validate(self) -> None:
         if self.covisibility_min_weight < 1:
@@ -168,6 +174,43 @@ class MappingConfig:
             raise ConfigError(f"mapping.cull_found_ratio: expected in [0, 1], got {self.cull_found_ratio}")
         if self.ba_max_keyframes < 1:
             raise ConfigError(f"mapping.ba_max_keyframes: expected >= 1, got {self.ba_max_keyframes}")
+
+
+@dataclass
+class ObjectOptimConfig:
+    """Bundle adjustment with objects (paper III-D, eq. 2-6); the reprojection terms use OptimConfig's
+    chi2 thresholds, iterations and LM settings.
+
+    Sigmas of eq. (3) and (4) grow linearly with the time between consecutive observations of an
+    object: sigma = base * dt. Huber deltas are the square roots of the chi2 values (95%: 6 dof for
+    eq. 3, 3 dof for eq. 4).
+    """
+
+    # eq. (2): "camera_in_object" = the camera pose in the object frame Q = T_o_c as the variable
+    # (gtsam's built-in projection factors on (Q, X_o)); "direct" = one Python factor on (T_w_c, T_w_o, X_o)
+    # per object observation (the reference formulation, same optimum, slower).
+    parametrization: Literal["camera_in_object", "direct"] = "camera_in_object"
+    sigma_linear_acc: float = 2.0  # eq. (3): sigma of v_{i+1} - v_i per second of dt (m/s^2)
+    sigma_angular_acc: float = 0.5  # eq. (3): sigma of w_{i+1} - w_i per second of dt (rad/s^2)
+    sigma_motion_xyz: float = 0.2  # eq. (4): sigma of each point's position residual per second of dt (m/s)
+    chi2_velocity: float = 12.592  # Huber delta^2 of eq. (3) (6 dof)
+    chi2_motion: float = 7.815  # Huber delta^2 of eq. (4), per object point (3 dof)
+    # eq. (4) with the object points as variables (exact joint optimum; one dense factor over all the
+    # object's points per frame pair) or held at their estimate at the start of each LM stage (eq. 2
+    # refines them; measured faster, see benchmarks/bench_object_ba.py).
+    motion_points_variable: bool = False
+    min_observation_points: int = 5  # an object observation with fewer used point observations keeps its pose
+    tail_seconds: float = 2.0  # object-weak BA (III-D): keyframes within this time of the newest are free
+
+    def validate(self) -> None:
+        if not (self.sigma_linear_acc > 0 and self.sigma_angular_acc > 0 and self.sigma_motion_xyz > 0):
+            raise ConfigError("optim.objects.sigma_linear_acc/sigma_angular_acc/sigma_motion_xyz: expected > 0")
+        if not (self.chi2_velocity > 0 and self.chi2_motion > 0):
+            raise ConfigError("optim.objects.chi2_velocity/chi2_motion: expected > 0")
+        if self.min_observation_points < 3:
+            raise ConfigError(f"optim.objects.min_observation_points: expected >= 3, got {self.min_observation_points}")
+        if not self.tail_seconds > 0:
+            raise ConfigError(f"optim.objects.tail_seconds: expected > 0, got {self.tail_seconds}")
 
 
 @dataclass
@@ -196,10 +239,15 @@ class OptimConfig:
     # Measured on bench_ba.py: lambda * I from 1.0 needs fewer rejected steps than Marquardt's diag(H) from 1e-3.
     lambda_initial: float = 1.0
     diagonal_damping: bool = False
+    # True: lambda scaled by a fixed factor 10 after each step (gtsam's default); False: Nielsen's update
+    # from the step's model fidelity. Measured on bench_ba.py: False rejects fewer steps, the same cost
+    # in 0.7-0.8x the CPU time per iteration (local BA and pose-only N=300).
+    lambda_fixed_factor: bool = False
     linear_solver: Literal["MULTIFRONTAL_CHOLESKY", "MULTIFRONTAL_QR", "SEQUENTIAL_CHOLESKY"] = "MULTIFRONTAL_CHOLESKY"
     # BA elimination order: SCHUR = all points, then the keyframes (the Schur complement, known from the
     # problem's structure at no cost); COLAMD / METIS = gtsam's fill-reducing orderings computed on the graph.
     ordering: Literal["SCHUR", "COLAMD", "METIS"] = "SCHUR"
+    objects: ObjectOptimConfig = field(default_factory=ObjectOptimConfig)  # BA with objects (eq. 2-6)
 
     def validate(self) -> None:
         if not (self.chi2_mono > 0 and self.chi2_stereo > 0):
@@ -218,6 +266,74 @@ class OptimConfig:
 
 
 @dataclass
+class ObjectsConfig:
+    """Object tracking of the `dynamic` mode (paper III-B to III-D): creation, association, pose,
+    keyframes for weak object tracking."""
+
+    # Creation: an unclaimed dynamic-class instance with this many keypoints with stereo depth
+    # closer than max_point_depth_m ("new nearby keypoints") creates an object.
+    min_new_points: int = 15
+    max_point_depth_m: float = 40.0
+    # New object points farther than this from the median of the instance's points are dropped
+    # (keypoints on the mask border that see the background).
+    max_point_spread_m: float = 5.0
+    # (a) projection search under the constant-velocity prediction: radius (px at level 0, scaled by
+    # the keypoint level), descriptor ratio; fewer matches than min_projection_matches -> (b).
+    projection_radius: float = 12.0
+    projection_nn_ratio: float = 0.9
+    min_projection_matches: int = 12
+    # (b) brute-force matching against the most overlapping instance (2D box IoU >= min_overlap_iou
+    # with the object's last box): Hamming threshold and ratio test.
+    min_overlap_iou: float = 0.1
+    bf_max_distance: int = 64
+    bf_nn_ratio: float = 0.8
+    # Pose-only optimization: an object observation needs this many inliers; a pose implying a
+    # speed above max_speed_mps since the last observation is rejected.
+    min_inliers: int = 8
+    max_speed_mps: float = 40.0
+    # Robust initialization from 3D-3D matches (stereo depth) when no velocity is known: RANSAC
+    # hypotheses and inlier distance.
+    ransac_hypotheses: int = 64
+    ransac_inlier_m: float = 0.3
+    # Track ids: a new object whose matched keypoints are >= join_ratio (and >= min_join_matches)
+    # points of one map object joins its track; else an instance whose box has IoU >= join_iou with
+    # an object seen in the previous frame joins that track (instance-to-instance association).
+    join_ratio: float = 0.5
+    min_join_matches: int = 8
+    join_iou: float = 0.3
+    # Tracks unseen for longer than this are no longer matched (occlusions up to it keep the id).
+    max_lost_s: float = 2.0
+    # Velocity known (prediction (a) used) only if the last two observations are this close in time.
+    max_velocity_gap_s: float = 0.5
+    # Weak object tracking (III-D): an object on an instance with >= weak_min_features keypoints but
+    # < weak_max_tracked tracked points asks for a keyframe (at most every kf_min_frames frames).
+    weak_min_features: int = 40
+    weak_max_tracked: int = 20
+    kf_min_frames: int = 2
+    # Object-point culling: seen in view this often with a found ratio below cull_found_ratio.
+    cull_min_visible: int = 5
+    cull_found_ratio: float = 0.25
+    # Bundle adjustment with objects on keyframes (III-D); False: object poses from tracking only.
+    ba: bool = True
+
+    def validate(self) -> None:
+        for name in ("min_new_points", "min_projection_matches", "min_inliers", "min_join_matches",
+                     "ransac_hypotheses", "kf_min_frames"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"objects.{name}: expected a positive integer, got {getattr(self, name)}")
+        if self.min_inliers < 3:
+            raise ConfigError(f"objects.min_inliers: expected >= 3, got {self.min_inliers}")
+        for name in ("max_point_depth_m", "max_point_spread_m", "projection_radius", "max_speed_mps",
+                     "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
+        for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",
+                     "projection_nn_ratio"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ConfigError(f"objects.{name}: expected in [0, 1], got {getattr(self, name)}")
+
+
+@dataclass
 class SlamConfig:
     """Root of the SLAM configuration."""
 
@@ -228,6 +344,7 @@ class SlamConfig:
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
+    objects: ObjectsConfig = field(default_factory=ObjectsConfig)  # object tracking (`dynamic` mode)
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> SlamConfig:

@@ -67,8 +67,9 @@ class LocalMapper:
         return kf
 
     # ----------------------------------------------------------- local mapping
-    def process(self, kf: KeyFrame, map_: Map) -> dict[str, float]:
-        """Local mapping for a new keyframe; returns a breakdown in ms."""
+    def process(self, kf: KeyFrame, map_: Map, static_ba: bool = True) -> dict[str, float]:
+        """Local mapping for a new keyframe; returns a breakdown in ms. `static_ba=False` leaves the
+        BA to the caller (BA with objects, `mapping.objects.object_local_ba`)."""
         detail = {}
         t = time.perf_counter()
 
@@ -86,7 +87,8 @@ class LocalMapper:
         lap("triangulation")
         self.fuse_neighbours(kf, map_)
         lap("fusion")
-        self.local_ba(kf, map_)
+        if static_ba:
+            self.local_ba(kf, map_)
         lap("ba")
         self.cull_keyframes(kf, map_)
         lap("kf_culling")
@@ -307,7 +309,20 @@ class LocalMapper:
             return
         obs_kf, obs_pt, obs_kp = map_.observers(pts)
         local_set = set(local)
-        fixed_ids = sorted(set(np.unique(obs_kf).tolist()) - local_set)
+        # Fixed: the keyframes outside the window that see the most local points.
+        outside = ~np.isin(obs_kf, local)
+        ids_out, counts = np.unique(obs_kf[outside], return_counts=True)
+        order = np.lexsort((ids_out, -counts))[: self.cfg.ba_max_fixed_keyframes]
+        fixed_ids = sorted(ids_out[order].tolist())
+        keep = np.isin(obs_kf, local + fixed_ids)
+        obs_kf, obs_pt, obs_kp = obs_kf[keep], obs_pt[keep], obs_kp[keep]
+        # A point seen by one keyframe does not constrain any pose: leave it out of the problem.
+        n_views = np.bincount(obs_pt, minlength=map_.points.size)
+        multi = n_views[obs_pt] >= self.cfg.ba_min_views
+        obs_kf, obs_pt, obs_kp = obs_kf[multi], obs_pt[multi], obs_kp[multi]
+        pts = pts[n_views[pts] >= self.cfg.ba_min_views]
+        if len(pts) == 0:
+            return
         all_ids = local + fixed_ids
         fixed = np.array([False] * len(local) + [True] * len(fixed_ids))
         first_id = min(map_.keyframes)
