@@ -109,7 +109,9 @@ class GroundTruth:
 
     def objects(self, t: float, T_w_c: np.ndarray, visible_px: np.ndarray, amodal_px: np.ndarray,
                 box2d: np.ndarray) -> list[ObjectState]:
-        """ObjectStates of the actors visible at time t (>= min_visible_px pixels, centre in front of the camera)."""
+        """ObjectStates of the actors visible at time t (>= min_visible_px pixels, which lie in front of the
+        camera by construction; an actor passing beside the camera is listed while any part of it shows,
+        so every instance id in the image has its object)."""
         actors = self.world.actors
         if not actors:
             return []
@@ -127,7 +129,7 @@ class GroundTruth:
         trunc = truncation(np.nan_to_num(rects), cam.width, cam.height)
         vis_frac = np.where(amodal_px > 0, np.minimum(visible_px / np.maximum(amodal_px, 1), 1.0), 0.0)
         level = occlusion_levels(vis_frac, amodal_px, self.cfg)
-        listed = np.flatnonzero((visible_px >= self.cfg.min_visible_px) & (T_c_o[:, 2, 3] > 0))
+        listed = np.flatnonzero(visible_px >= max(self.cfg.min_visible_px, 1))
         return [
             ObjectState(
                 track_id=int(actors[k].track_id), cls=actors[k].cls, T_w_o=T_w_o[k], v_w=v_w[k], w_w=w_w[k],
