@@ -370,10 +370,9 @@ def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) 
         b.box(body, (-(cab_l + 0.1) / 2, 0, z0 + (1.0 + H) / 2), ((L - cab_l - 0.1) / 2, W / 2, (H - 1.0) / 2), cargo)
     axle_x = L / 2 - r - 0.35 * (L / 4.5)
     quat = [math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0]  # cylinder axis along y
-    for xs in (axle_x, -axle_x):
-        for ys in (1, -1):
-            body.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[r, 0.11], pos=[xs, ys * (W / 2 - 0.13), z0 + r],
-                          quat=quat, material=tyre, **_VISUAL)
+    for xs in (axle_x, -axle_x):  # one cylinder per axle: both wheels, half the geometry of four
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[r, W / 2 - 0.02], pos=[xs, 0.0, z0 + r],
+                      quat=quat, material=tyre, **_VISUAL)
 
 
 def _add_pedestrian(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) -> None:
