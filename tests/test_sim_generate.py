@@ -74,7 +74,8 @@ def test_occlusion_knob_lowers_visible_fraction(tmp_path):
         fractions = []
         for seed in ("1", "2"):
             out = tmp_path / f"occ{occlusion}-{seed}"
-            assert simulate(out, "--frames", "4", "--seed", seed, "--set", f"occlusion={occlusion}") == 0
+            assert simulate(out, "--frames", "5", "--seed", seed, "--size", "240x180",
+                            "--set", f"occlusion={occlusion}") == 0
             fractions += [obj.visible_fraction for obj in _objects(out)]
         means[occlusion] = float(np.mean(fractions))
     assert means["1.0"] < means["0.0"] - 0.05, means
