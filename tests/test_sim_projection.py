@@ -221,3 +221,25 @@ def test_amodal_windows_and_full_renders_agree(scenario):
             np.testing.assert_array_equal(a.amodal_px, b.amodal_px)
             assert np.all(a.visible_px[visible] <= a.amodal_px[visible])
             assert np.all(a.amodal_px[~visible] == 0)
+
+
+def test_gt_velocities_match_pose_differences(seq):
+    """v_w and w_w (in the sequence world) equal central differences of the GT object poses."""
+    from dynaslam2.geometry.se3 import so3_log
+
+    dt = float(seq.timestamps[1] - seq.timestamps[0])
+    n_checked = n_moving = 0
+    for i in range(1, len(seq) - 1):
+        before = {o.track_id: o for o in seq.gt_objects(i - 1)}
+        after = {o.track_id: o for o in seq.gt_objects(i + 1)}
+        for obj in seq.gt_objects(i):
+            if obj.track_id not in before or obj.track_id not in after:
+                continue
+            a, b = before[obj.track_id].T_w_o, after[obj.track_id].T_w_o
+            v_fd = (b[:3, 3] - a[:3, 3]) / (2 * dt)
+            w_fd = so3_log(b[:3, :3] @ a[:3, :3].T) / (2 * dt)
+            np.testing.assert_allclose(obj.v_w, v_fd, atol=0.05 + 0.02 * np.linalg.norm(v_fd))
+            np.testing.assert_allclose(obj.w_w, w_fd, atol=0.02)
+            n_checked += 1
+            n_moving += int(np.linalg.norm(v_fd) > 1.0)
+    assert n_checked >= 20 and n_moving >= 5, (n_checked, n_moving)
