@@ -253,7 +253,11 @@ EGO_CLEARANCE = 3.0  # m kept free ahead of (and behind) the ego's box by every 
 
 @dataclass(frozen=True)
 class StreetLayout:
-    """Street geometry in the MuJoCo world: the street runs along +x, y to the left, z up, road at z=0."""
+    """Street geometry in street coordinates (x along the street, y to the left, z up, road at z = 0).
+
+    Planning happens in street coordinates; `to_world` bends them onto the street's centreline (a
+    `Path`, straight then a gentle smooth bend), so lanes, kerbs and facades follow the bend.
+    """
 
     lane_width: float
     lanes_per_direction: int
@@ -264,6 +268,26 @@ class StreetLayout:
     x_hi: float
     x_int: float | None  # x of the crossing street (intersection layout) or None
     cross_half: float  # half width of the crossing street road
+    centre: Path  # centreline in the MuJoCo world, arc length s = x - centre_x0
+    centre_x0: float
+
+    def to_world(self, x, y, yaw=0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Street coordinates (x, y, yaw) -> MuJoCo world (X, Y, YAW) on the ground plane."""
+        cx, cy, th = self.centre.pose(np.asarray(x, float) - self.centre_x0)
+        y = np.asarray(y, float)
+        return cx - y * np.sin(th), cy + y * np.cos(th), np.asarray(yaw, float) + th
+
+    def world_pose(self, traj: "Trajectory", t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(X, Y, YAW) in the MuJoCo world of a trajectory planned in street coordinates."""
+        return self.to_world(*traj.pose(t))
+
+    def world_velocity(self, traj: "Trajectory", t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(vX, vY, yaw rate) in the MuJoCo world: central differences of `world_pose`."""
+        t = np.asarray(t, float)
+        xa, ya, qa = self.world_pose(traj, t + _DT_DIFF)
+        xb, yb, qb = self.world_pose(traj, t - _DT_DIFF)
+        k = 0.5 / _DT_DIFF
+        return (xa - xb) * k, (ya - yb) * k, (qa - qb) * k
 
     def lane_y(self, index: int, oncoming: bool) -> float:
         """Lane centre; index 0 is the lane next to the centre line; oncoming lanes are at y > 0."""
@@ -350,8 +374,14 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
     if cfg.layout == "intersection":
         x_stop = float(ego.arc(ego_speed.t_knots[2]))
         x_int = x_stop + EGO_DIMS[0] / 2 + EGO_CLEARANCE + cross_half + 4.5
-    layout = StreetLayout(lw, n_l, half_road, kerb, kerb + cfg.sidewalk_width, -40.0,
-                          max(ego_end, x_int or 0.0) + cfg.view_ahead, x_int, cross_half)
+    x_lo, x_hi = -40.0, max(ego_end, x_int or 0.0) + cfg.view_ahead
+    curve_start = cfg.curve_start if x_int is None else max(cfg.curve_start, x_int + cross_half + 40.0)
+    centre_x0 = x_lo - 100.0
+    centre = Path.build(centre_x0, 0.0, 0.0, [("straight", curve_start - centre_x0),
+                                              ("turn", cfg.curve_length, np.radians(cfg.curve_deg)),
+                                              ("straight", 1.0)])
+    layout = StreetLayout(lw, n_l, half_road, kerb, kerb + cfg.sidewalk_width, x_lo, x_hi, x_int, cross_half,
+                          centre, centre_x0)
     times = np.arange(0.0, max(duration, 0.05) + 1e-9, 0.05)
     fp = Footprints(times)
     fp.add(ego, EGO_DIMS[0] + 2 * EGO_CLEARANCE, EGO_DIMS[1])

@@ -57,6 +57,9 @@ class ScenarioConfig:
     parking_width: float = 2.5  # m, parking strip at each kerb
     sidewalk_width: float = 4.0  # m
     view_ahead: float = 120.0  # m of street modelled beyond the ego's last position
+    curve_deg: float = 15.0  # the street bends by this angle (+ = left, 0 = straight) ...
+    curve_start: float = 45.0  # ... starting this far (m) ahead of the ego's start (after the intersection)
+    curve_length: float = 120.0  # ... over this length (m), curvature rising and falling smoothly
     texture_px: int = 256  # side of vehicle/facade textures in pixels
 
     def validate(self) -> None:
@@ -83,6 +86,10 @@ class ScenarioConfig:
             ("parking_width", 2.0 <= self.parking_width <= 5, "metres in [2, 5]"),
             ("sidewalk_width", 2.0 <= self.sidewalk_width <= 10, "metres in [2, 10]"),
             ("view_ahead", 20 <= self.view_ahead <= 1000, "metres in [20, 1000]"),
+            ("curve_deg", -60 <= self.curve_deg <= 60, "degrees in [-60, 60]"),
+            ("curve_start", -1000 <= self.curve_start <= 10000, "metres in [-1000, 10000]"),
+            ("curve_length", 4 * abs(self.curve_deg) <= self.curve_length <= 5000,
+             "metres in [4*|curve_deg|, 5000] (a bend no sharper than ~1 deg per 4 m)"),
             ("texture_px", 32 <= self.texture_px <= 1024, "pixels in [32, 1024]"),
         ]
         for field, ok, expected in checks:

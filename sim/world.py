@@ -1,6 +1,8 @@
 """The MuJoCo street world: scenery, textured vehicles and pedestrians on mocap bodies, stereo rig.
 
-Frames: `m` is the MuJoCo world (street along +x, y left, z up, road surface at z = 0). Each actor
+Frames: `m` is the MuJoCo world (z up, road surface at z = 0). The street starts along +x and then
+bends by `curve_deg` (road and sidewalks are meshes that follow the bend exactly; everything is
+planned in street coordinates and mapped by `StreetLayout.to_world`). Each actor
 is one mocap root body whose origin is the centre of its 3D box (x forward, y left, z up) and whose
 geoms fill that box exactly (dims = (length, width, height)). The ego is a mocap body carrying the
 cameras `left` and `right` (right = left + baseline along the camera x axis).
@@ -15,7 +17,7 @@ import mujoco
 import numpy as np
 
 from sim import textures as tex
-from sim.motion import CAMERA_FORWARD, MotionPlan, PlannedActor, Trajectory, plan_scenario
+from sim.motion import CAMERA_FORWARD, MotionPlan, PlannedActor, StreetLayout, Trajectory, plan_scenario
 from sim.scenarios import ScenarioConfig
 
 # OpenCV camera axes (x right, y down, z forward) expressed in the ego body frame (x fwd, y left, z up)
@@ -23,6 +25,7 @@ R_BODY_CV = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 _VISUAL = dict(contype=0, conaffinity=0)
 _ROAD_SEGMENT = 20.0  # m of road per texture
 _TEXTURE_POOL = 8  # distinct road / sidewalk textures per world
+_RIBBON_STEP = 2.5  # m between cross-sections of road and sidewalk meshes
 
 
 def camera_intrinsics(cfg: ScenarioConfig) -> tuple[float, float, float, float]:
@@ -77,10 +80,11 @@ class World:
         n = len(self._trajectories)
         xyq = np.empty((len(times), n, 3))
         vel = np.empty((len(times), n, 3))
+        lay = self.plan.layout
         for i, traj in enumerate(self._trajectories):
-            xyq[:, i] = np.column_stack(traj.pose(times))
-            vel[:, i] = np.column_stack(traj.velocity(times))
-        return xyq, vel, np.column_stack(self.plan.ego.pose(times))
+            xyq[:, i] = np.column_stack(lay.world_pose(traj, times))
+            vel[:, i] = np.column_stack(lay.world_velocity(traj, times))
+        return xyq, vel, np.column_stack(lay.world_pose(self.plan.ego, times))
 
     def _state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(xyq (N, 3), vel (N, 3), ego (3,)) at t; frame times come from a table made once."""
@@ -127,8 +131,9 @@ class World:
 class _Builder:
     """Adds textures, materials and geoms to an MjSpec with unique names."""
 
-    def __init__(self, spec: mujoco.MjSpec, rich: bool, px: int):
+    def __init__(self, spec: mujoco.MjSpec, layout: StreetLayout, rich: bool, px: int):
         self.spec = spec
+        self.layout = layout
         self.rich = rich
         self.px = px  # side of vehicle textures; facades up to twice that
         self.n = 0
@@ -146,12 +151,61 @@ class _Builder:
             mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = tname
         return name
 
+    def street_box(self, center, half, material: str, yaw: float = 0.0, name: str | None = None):
+        """World box whose centre (x, y, z) and yaw are in street coordinates (follows the bend)."""
+        X, Y, Q = self.layout.to_world(center[0], center[1], yaw)
+        return self.box(self.spec.worldbody, (float(X), float(Y), center[2]), half, material,
+                        quat=_yaw_quat(float(Q)).tolist(), name=name)
+
+    def street_geom(self, gtype, size, center, material: str):
+        """World cylinder/ellipsoid (vertical axis) at a street-coordinate centre."""
+        X, Y, _ = self.layout.to_world(center[0], center[1])
+        return self.spec.worldbody.add_geom(type=gtype, size=list(size), pos=[float(X), float(Y), center[2]],
+                                            material=material, **_VISUAL)
+
+    def ribbon(self, name: str, x_a: float, x_b: float, y_lo: float, y_hi: float, z_top: float, z_bot: float,
+               material: str):
+        """A slab mesh over street coordinates [x_a, x_b] x [y_lo, y_hi] that follows the bend exactly
+        (neighbouring ribbons share their edges). Texture u runs along x, v from y_hi (row 0) to y_lo."""
+        n = max(1, int(math.ceil((x_b - x_a) / _RIBBON_STEP)))
+        xs = np.linspace(x_a, x_b, n + 1)
+        u = (xs - x_a) / (x_b - x_a)
+        X_lo, Y_lo, _ = self.layout.to_world(xs, np.full_like(xs, y_lo))
+        X_hi, Y_hi, _ = self.layout.to_world(xs, np.full_like(xs, y_hi))
+        verts, tcs, faces = [], [], []
+
+        def strip(p0, p1, t0, t1, flip):
+            """Quads between two polylines (n+1 points each), own vertices (sharp normals)."""
+            base = sum(len(v) for v in verts)
+            verts.append(np.concatenate([p0, p1]))
+            tcs.append(np.concatenate([t0, t1]))
+            i = np.arange(n)
+            a, b, c, d = base + i, base + i + 1, base + n + 1 + i, base + n + 2 + i
+            tri = np.concatenate([np.stack([a, b, c], 1), np.stack([b, d, c], 1)])
+            faces.append(tri[:, ::-1] if flip else tri)
+
+        def pts(X, Y, z):
+            return np.column_stack([X, Y, np.full_like(X, z)])
+
+        t_lo, t_hi = np.column_stack([u, np.ones_like(u)]), np.column_stack([u, np.zeros_like(u)])
+        strip(pts(X_lo, Y_lo, z_top), pts(X_hi, Y_hi, z_top), t_lo, t_hi, False)  # top, facing up
+        strip(pts(X_lo, Y_lo, z_bot), pts(X_hi, Y_hi, z_bot), t_lo, t_hi, True)  # bottom
+        strip(pts(X_lo, Y_lo, z_bot), pts(X_lo, Y_lo, z_top), t_lo, t_lo, False)  # side at y_lo
+        strip(pts(X_hi, Y_hi, z_bot), pts(X_hi, Y_hi, z_top), t_hi, t_hi, True)  # side at y_hi
+        self.spec.add_mesh(name=f"{name}_mesh", uservert=np.concatenate(verts).ravel().tolist(),
+                           userface=np.concatenate(faces).ravel().tolist(),
+                           usertexcoord=np.concatenate(tcs).ravel().tolist())
+        return self.spec.worldbody.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{name}_mesh",
+                                            material=material, **_VISUAL)
+
     @staticmethod
-    def box(body, center, half, material: str, quat=None, group: int = 0):
+    def box(body, center, half, material: str, quat=None, group: int = 0, name: str | None = None):
         kw = dict(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half), pos=list(center), material=material,
                   group=group, **_VISUAL)
         if quat is not None:
             kw["quat"] = list(quat)
+        if name is not None:
+            kw["name"] = name
         return body.add_geom(**kw)
 
 
@@ -163,7 +217,7 @@ def build_world(cfg: ScenarioConfig) -> World:
     rng_actor = np.random.default_rng(seeds[2])
     spec = mujoco.MjSpec()
     spec.modelname = f"street_{cfg.name}_{cfg.seed}"
-    b = _Builder(spec, cfg.texture == "rich", cfg.texture_px)
+    b = _Builder(spec, plan.layout, cfg.texture == "rich", cfg.texture_px)
     _setup_visual(spec, cfg)
     _add_scenery(b, plan, cfg, rng_scene)
     bodies = []
@@ -204,7 +258,6 @@ def _setup_visual(spec: mujoco.MjSpec, cfg: ScenarioConfig) -> None:
 
 def _add_scenery(b: _Builder, plan: MotionPlan, cfg: ScenarioConfig, rng: np.random.Generator) -> None:
     lay = plan.layout
-    wb = b.spec.worldbody
     rich = b.rich
     x0, x1 = lay.x_lo - 30.0, lay.x_hi + 30.0
     lines = [0.0, lay.half_road, -lay.half_road]
@@ -216,50 +269,43 @@ def _add_scenery(b: _Builder, plan: MotionPlan, cfg: ScenarioConfig, rng: np.ran
                  for _ in range(_TEXTURE_POOL)]
     n_seg = int(math.ceil((x1 - x0) / _ROAD_SEGMENT))
     order = rng.permutation(n_seg) % _TEXTURE_POOL
-    sw_c = lay.kerb + cfg.sidewalk_width / 2
+    sw_in, sw_out = lay.kerb, lay.kerb + cfg.sidewalk_width
     for i in range(n_seg):
-        xc = x0 + (i + 0.5) * _ROAD_SEGMENT
-        b.box(wb, (xc, 0, -0.05), (_ROAD_SEGMENT / 2, lay.kerb, 0.05), road_mats[order[i]])
+        a, c = x0 + i * _ROAD_SEGMENT, x0 + (i + 1) * _ROAD_SEGMENT
+        b.ribbon(f"road{i}", a, c, -lay.kerb, lay.kerb, 0.0, -0.1, road_mats[order[i]])
         for side in (-1, 1):
             mat = walk_mats[(order[i] + (3 if side > 0 else 0)) % _TEXTURE_POOL]
-            if lay.x_int is not None and abs(xc - lay.x_int) < _ROAD_SEGMENT:
-                _sidewalk_split(b, wb, xc, side * sw_c, cfg.sidewalk_width, lay, mat)
-            else:
-                b.box(wb, (xc, side * sw_c, 0.075), (_ROAD_SEGMENT / 2, cfg.sidewalk_width / 2, 0.075), mat)
+            y_lo, y_hi = (sw_in, sw_out) if side > 0 else (-sw_out, -sw_in)
+            pieces = [(a, c)]
+            if lay.x_int is not None:  # the crossing street cuts the sidewalks
+                pieces = [(a, min(c, lay.x_int - lay.cross_half)), (max(a, lay.x_int + lay.cross_half), c)]
+            for k, (pa, pc) in enumerate(pieces):
+                if pc - pa > 0.05:
+                    b.ribbon(f"sidewalk{i}_{side}_{k}", pa, pc, y_lo, y_hi, 0.15, 0.0, mat)
     if lay.x_int is not None:
         _add_intersection(b, lay, cfg, rng)
     _add_buildings(b, lay, cfg, rng, x0, x1)
     _add_props(b, plan, rng)
 
 
-def _sidewalk_split(b: _Builder, wb, xc: float, yc: float, width: float, lay, mat: str) -> None:
-    """A sidewalk segment with the crossing street cut out."""
-    lo, hi = xc - _ROAD_SEGMENT / 2, xc + _ROAD_SEGMENT / 2
-    for a, c in ((lo, min(hi, lay.x_int - lay.cross_half)), (max(lo, lay.x_int + lay.cross_half), hi)):
-        if c - a > 0.05:
-            b.box(wb, ((a + c) / 2, yc, 0.075), ((c - a) / 2, width / 2, 0.075), mat)
-
-
 def _add_intersection(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generator) -> None:
     """Crossing street roads, crosswalk stripes, buildings along the crossing street."""
-    wb = b.spec.worldbody
     length = 90.0
     mat = b.material(tex.asphalt(rng, 2 * lay.cross_half, length, [0.0], [], rich=b.rich), specular=0.05)
-    q = _yaw_quat(np.pi / 2)
     for side in (-1, 1):
         yc = side * (lay.kerb + length / 2)
-        b.box(wb, (lay.x_int, yc, -0.05), (length / 2, lay.cross_half, 0.05), mat, quat=q)
+        b.street_box((lay.x_int, yc, -0.05), (length / 2, lay.cross_half, 0.05), mat, yaw=np.pi / 2)
         for xs in (-1, 1):  # sidewalks along the crossing street
             xc = lay.x_int + xs * (lay.cross_half + cfg.sidewalk_width / 2)
             smat = b.material(tex.sidewalk(rng, cfg.sidewalk_width, length, rich=b.rich), specular=0.05)
-            b.box(wb, (xc, yc + side * cfg.sidewalk_width / 2, 0.075), (length / 2, cfg.sidewalk_width / 2, 0.075),
-                  smat, quat=q)
+            b.street_box((xc, yc + side * cfg.sidewalk_width / 2, 0.075),
+                         (length / 2, cfg.sidewalk_width / 2, 0.075), smat, yaw=np.pi / 2)
     paint = b.material(None, rgba=(0.88, 0.88, 0.85, 1), specular=0.05)
     for xs in (-1, 1):  # zebra stripes across the main street
         xc = lay.x_int + xs * (lay.cross_half + 2.0)
         y = -lay.kerb + 0.5
         while y < lay.kerb - 0.5:
-            b.box(wb, (xc, y + 0.25, 0.002), (1.5, 0.25, 0.002), paint)
+            b.street_box((xc, y + 0.25, 0.002), (1.5, 0.25, 0.002), paint)
             y += 1.0
     for xs in (-1, 1):  # facades lining the crossing street
         for side in (-1, 1):
@@ -270,12 +316,12 @@ def _add_intersection(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Gene
                 depth = rng.uniform(10.0, 14.0)
                 xc = lay.x_int + xs * (lay.cross_half + cfg.sidewalk_width + depth / 2)
                 fmat = b.material(tex.facade(rng, width, height, max_px=2 * b.px, rich=b.rich))
-                b.box(wb, (xc, side * (y + width / 2), height / 2), (width / 2, depth / 2, height / 2), fmat, quat=q)
+                b.street_box((xc, side * (y + width / 2), height / 2), (width / 2, depth / 2, height / 2), fmat,
+                             yaw=np.pi / 2)
                 y += width
 
 
 def _add_buildings(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generator, x0: float, x1: float) -> None:
-    wb = b.spec.worldbody
     forecourt = b.material(None, rgba=(0.55, 0.53, 0.5, 1))
     for side in (-1, 1):
         x = x0
@@ -294,19 +340,19 @@ def _add_buildings(b: _Builder, lay, cfg: ScenarioConfig, rng: np.random.Generat
             setback = rng.uniform(0.0, 1.5)
             yc = side * (lay.sidewalk_outer + setback + depth / 2)
             mat = b.material(tex.facade(rng, width, height, max_px=2 * b.px, rich=b.rich))
-            b.box(wb, ((a + c) / 2, yc, height / 2), (width / 2, depth / 2, height / 2), mat)
+            b.street_box(((a + c) / 2, yc, height / 2), (width / 2, depth / 2, height / 2), mat,
+                         name=f"building{side}_{int(round(a * 100))}")
             if setback > 0.05:  # forecourt pavement up to the facade
-                b.box(wb, ((a + c) / 2, side * (lay.sidewalk_outer + setback / 2), 0.07),
-                      (width / 2, setback / 2, 0.07), forecourt)
+                b.street_box(((a + c) / 2, side * (lay.sidewalk_outer + setback / 2), 0.07),
+                             (width / 2, setback / 2, 0.07), forecourt)
     span = lay.sidewalk_outer + 15.0
     for xe in (x0 - 8.0, x1 + 8.0):  # end walls closing the street
         height = rng.uniform(12.0, 25.0)
         mat = b.material(tex.facade(rng, 2 * span, height, max_px=2 * b.px, rich=b.rich))
-        b.box(wb, (xe, 0.0, height / 2), (8.0, span, height / 2), mat)
+        b.street_box((xe, 0.0, height / 2), (8.0, span, height / 2), mat)
 
 
 def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
-    wb = b.spec.worldbody
     barks = [b.material(tex.bark(rng, 128, rich=b.rich)) for _ in range(4)]
     leaves = [b.material(tex.foliage(rng, 128, rich=b.rich)) for _ in range(4)]
     metals = [b.material(tex.metal(rng, 64, rich=b.rich), specular=0.3) for _ in range(4)]
@@ -315,28 +361,27 @@ def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
         k = int(rng.integers(4))
         if p.kind == "tree":
             trunk_h = rng.uniform(3.6, 4.5)
-            wb.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[rng.uniform(0.12, 0.2), trunk_h / 2],
-                        pos=[p.x, p.y, trunk_h / 2], material=barks[k], **_VISUAL)
+            b.street_geom(mujoco.mjtGeom.mjGEOM_CYLINDER, (rng.uniform(0.12, 0.2), trunk_h / 2),
+                          (p.x, p.y, trunk_h / 2), barks[k])
             r = rng.uniform(1.3, 2.0)
-            wb.add_geom(type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[r, r, r * rng.uniform(0.9, 1.4)],
-                        pos=[p.x, p.y, trunk_h + r * 0.8], material=leaves[k], **_VISUAL)
+            b.street_geom(mujoco.mjtGeom.mjGEOM_ELLIPSOID, (r, r, r * rng.uniform(0.9, 1.4)),
+                          (p.x, p.y, trunk_h + r * 0.8), leaves[k])
         elif p.kind == "pole":
             h = rng.uniform(5.0, 7.0)
-            wb.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.09, h / 2], pos=[p.x, p.y, h / 2],
-                        material=metals[k], **_VISUAL)
+            b.street_geom(mujoco.mjtGeom.mjGEOM_CYLINDER, (0.09, h / 2), (p.x, p.y, h / 2), metals[k])
             inward = -np.sign(p.y)
-            b.box(wb, (p.x, p.y + inward * 0.8, h), (0.25, 0.8, 0.06), metals[k])
-            b.box(wb, (p.x, p.y + inward * 1.5, h - 0.1), (0.2, 0.15, 0.06), lamp)
+            b.street_box((p.x, p.y + inward * 0.8, h), (0.25, 0.8, 0.06), metals[k])
+            b.street_box((p.x, p.y + inward * 1.5, h - 0.1), (0.2, 0.15, 0.06), lamp)
             if rng.random() < 0.5:  # a sign board
-                b.box(wb, (p.x, p.y, rng.uniform(2.2, 3.0)), (0.04, 0.35, 0.3),
-                      b.material(tex.vehicle_paint(rng, 64, rich=b.rich)))
+                b.street_box((p.x, p.y, rng.uniform(2.2, 3.0)), (0.04, 0.35, 0.3),
+                             b.material(tex.vehicle_paint(rng, 64, rich=b.rich)))
         elif p.kind == "hedge":
             h = rng.uniform(0.9, 1.4)
-            b.box(wb, (p.x, p.y, 0.15 + h / 2), (p.length / 2, p.width / 2, h / 2), leaves[k])
+            b.street_box((p.x, p.y, 0.15 + h / 2), (p.length / 2, p.width / 2, h / 2), leaves[k])
         else:  # kiosk / advertising box
             h = rng.uniform(2.3, 2.9)
-            b.box(wb, (p.x, p.y, 0.15 + h / 2), (p.length / 2, p.width / 2, h / 2),
-                  b.material(tex.vehicle_paint(rng, 128, rich=b.rich)))
+            b.street_box((p.x, p.y, 0.15 + h / 2), (p.length / 2, p.width / 2, h / 2),
+                         b.material(tex.vehicle_paint(rng, 128, rich=b.rich)))
 
 
 def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) -> None:

@@ -162,7 +162,7 @@ def test_intrinsics_rule_from_rendered_depth():
     """fx = fy = (H/2)/tan(fovy/2), cx = (W-1)/2, cy = (H-1)/2: fitted from rendered metric depth of the
     road plane (z = 0, gives fy and cy) and of street-facing facades (planes y = const, give fx and cx)."""
     cfg = load_scenario("static", ["frames=1", "image_size=160x120", "texture_px=32", "view_ahead=40",
-                                   "n_vehicles=0", "n_pedestrians=0", "occlusion=0"])
+                                   "n_vehicles=0", "n_pedestrians=0", "occlusion=0", "curve_deg=0"])
     w = build_world(cfg)
     fx, fy, cx, cy = camera_intrinsics(cfg)
     W, H = cfg.image_size
@@ -180,7 +180,8 @@ def test_intrinsics_rule_from_rendered_depth():
     m = w.model
     v, u = np.mgrid[0:H, 0:W]
     T_m_c = w.ego_T_m_c(0.0)
-    road = np.isin(seg, np.flatnonzero((m.geom_size[:, 2] == 0.05) & (m.geom_pos[:, 2] == -0.05)))
+    names = [m.geom(g).name for g in range(m.ngeom)]
+    road = np.isin(seg, [g for g, n in enumerate(names) if n.startswith("road")])
     road &= depth < 60
     assert road.sum() > 200
     # road plane: v = cy + fy * cam_height / Z
@@ -188,7 +189,8 @@ def test_intrinsics_rule_from_rendered_depth():
     cy_fit, fy_fit = np.linalg.lstsq(A, v[road], rcond=None)[0]
     assert abs(cy_fit - cy) < 0.1 and abs(fy_fit / fy - 1) < 1e-3
     # facades on the right side: plane y_m = y_face, in the camera X_c = -(y_face - y_cam) = d
-    fac = np.flatnonzero((m.geom_bodyid == 0) & (m.geom_size[:, 2] > 2.5) & (m.geom_pos[:, 1] < 0))
+    fac = [g for g, n in enumerate(names) if n.startswith("building-1_")]  # right side, street along +x
+    assert fac
     us, zs, ds = [], [], []
     for g in fac:
         mask = (seg == g) & (depth < 80)
@@ -252,3 +254,15 @@ def test_motion_primitives_are_exact():
     vx, vy, wz = lead.velocity(np.array([3.0, 5.5]))
     # |v| equals the profile speed up to the path interpolation (arc length exact to ~1e-5 relative)
     np.testing.assert_allclose(np.hypot(vx, vy), prof.speed(np.array([3.0, 5.5])), rtol=1e-4, atol=1e-9)
+
+
+def test_street_bend_turns_the_ego():
+    w = build_world(load_scenario("following", ["frames=150", "image_size=64x48", "texture_px=32",
+                                                "curve_deg=15", "curve_start=30"]))
+    R0, R1 = w.ego_T_m_c(0.0)[:3, :3], w.ego_T_m_c(14.9)[:3, :3]
+    yaw_change = np.degrees(np.arccos(np.clip((np.trace(R0.T @ R1) - 1) / 2, -1, 1)))
+    assert 3.0 < yaw_change <= 15.0 + 1e-6
+    w.set_time(14.9)
+    cid = w.model.cam("left").id
+    np.testing.assert_allclose(w.ego_T_m_c(14.9)[:3, :3], w.data.cam_xmat[cid].reshape(3, 3) @ np.diag([1, -1, -1]),
+                               atol=1e-9)
