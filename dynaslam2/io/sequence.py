@@ -233,10 +233,11 @@ class SequenceWriter:
 
 
 def depth_to_png(depth_m: np.ndarray) -> np.ndarray:
-    """float metres (0 / non-finite = none) -> uint16 millimetres, clipped to 65535."""
+    """float metres -> uint16 millimetres; 0 (no depth) where the depth is 0, non-finite or beyond
+    the 65.535 m a uint16 holds (writing 65.535 m there would be silently wrong depth)."""
     depth_m = np.asarray(depth_m, dtype=np.float64)
     mm = np.where(np.isfinite(depth_m) & (depth_m > 0), np.rint(depth_m * DEPTH_PNG_UNITS_PER_M), 0.0)
-    return np.clip(mm, 0, 65535).astype(np.uint16)
+    return np.where(mm <= 65535, mm, 0).astype(np.uint16)
 
 
 def depth_from_png(depth_mm: np.ndarray) -> np.ndarray:
