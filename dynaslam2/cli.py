@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output sequence folder")
     p.add_argument("--overwrite", action="store_true", help="replace a non-empty output folder")
     p.add_argument("--preview", action="store_true", help="also write preview.mp4 and a preview.png contact sheet")
-    p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("demo", help="simulate the default scenario and write a preview",
@@ -121,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "contact sheet.")
     p.add_argument("--frames", type=int, default=DEMO_FRAMES, help=f"frames to simulate (default {DEMO_FRAMES})")
     p.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
-    p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("run", help="run SLAM on a sequence and write the results files",
@@ -136,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a SLAM config value, e.g. --set tracking.min_inliers=40 (repeatable)")
     p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty RES")
-    p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("eval", help="score a run's results against the sequence's ground truth",
@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("seq", metavar="SEQ", help="sequence folder with ground-truth poses.txt")
     p.add_argument("res", metavar="RES", help="results folder of `dynaslam2 run`")
     p.add_argument("--json", default=None, metavar="FILE", help="write the metrics here instead of RES/metrics.json")
-    p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("bench", help="performance benchmarks",
@@ -155,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", choices=["sim"], help="what to benchmark: sim = sequence generation")
     p.add_argument("--frames", type=int, default=30, help="frames per configuration (default 30)")
     p.add_argument("--sizes", nargs="+", default=["640x480", "1242x375"], help="image sizes WxH")
-    p.add_argument("--quiet", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_bench)
     return parser
 
