@@ -1,0 +1,82 @@
+"""Benchmark of the bundle adjustment with objects (dynaslam2.optim.object_ba), median ms.
+
+    python benchmarks/bench_object_ba.py [--repeats 5] [--set optim.objects.motion_points_variable=true ...]
+
+A traffic-like synthetic window (dynaslam2.optim.synthetic_objects): 10 keyframes over 2 s (2 fixed),
+a KITTI-like stereo camera at 8 m/s, 1500 static points seen by up to 5 keyframes, 4 objects x 80
+points moving at constant velocity, each seen in every keyframe. Times the three cases of paper III-D
+(camera weak only = static local BA, object weak only, both), the "direct" eq. (2) parametrization
+against the default Q = T_o_c one, and eq. (4) with the object points as variables. Wall and CPU
+(process) time are printed: the machine is shared, CPU time is the steadier figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import time
+
+import numpy as np
+
+from dynaslam2.config import load_config
+from dynaslam2.geometry.se3 import inverse, se3_log
+from dynaslam2.optim.object_ba import object_bundle_adjustment
+from dynaslam2.optim.synthetic import kitti_like_camera
+from dynaslam2.optim.synthetic_objects import make_object_window
+
+CAMERA = kitti_like_camera()
+
+
+def errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position error of the frame origins (m) and rotation error (deg)."""
+    d = se3_log(T_est @ inverse(T_true))
+    position = np.linalg.norm(T_est[..., :3, 3] - T_true[..., :3, 3], axis=-1)
+    return position, np.degrees(np.linalg.norm(d[..., 3:], axis=-1))
+
+
+def run(label: str, window, problem, cfg, repeats: int) -> float:
+    wall, cpu, results = [], [], []
+    for _ in range(repeats):
+        t, c = time.perf_counter(), time.process_time()
+        results.append(object_bundle_adjustment(problem, CAMERA, cfg))
+        wall.append(1e3 * (time.perf_counter() - t))
+        cpu.append(1e3 * (time.process_time() - c))
+    r = results[-1]
+    free = ~problem.fixed
+    cam_t, _ = errors(r.T_c_w[free], window.T_c_w_true[free])
+    obj_t, obj_r = errors(r.T_w_o, window.T_w_o_true)
+    print(f"{label}: median {np.median(wall):.0f} ms wall, {np.median(cpu):.0f} ms CPU (build "
+          f"{np.median([x.timings_ms['build'] for x in results]):.0f}, LM "
+          f"{np.median([x.timings_ms['solve'] for x in results]):.0f} ms wall), {r.iterations} LM iterations; "
+          f"camera median {100 * np.median(cam_t):.2f} cm; object median {100 * np.median(obj_t):.2f} cm "
+          f"{np.median(obj_r):.3f} deg")
+    return float(np.median(cpu))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override optim.key=value")
+    args = parser.parse_args()
+    cfg = load_config(None, args.overrides).optim
+    window = make_object_window(np.random.default_rng(0), CAMERA, n_keyframes=10, n_fixed=2, n_static=1500,
+                                n_objects=4, n_object_points=80, outlier_fraction=0.05)
+    p = window.problem
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; K={len(p.T_c_w)} static points "
+          f"{len(p.X_w)} ({len(p.obs_kf)} obs), object observations {len(p.obj_frames)}, object points "
+          f"{len(p.X_o)} ({len(p.oobs_f)} obs)")
+    run("camera weak only (static local BA)", window, dataclasses.replace(p, optimize_objects=False), cfg,
+        args.repeats)
+    run("object weak only (static points fixed)", window, dataclasses.replace(p, optimize_static=False), cfg,
+        args.repeats)
+    both = run("both (joint, Q = T_o_c)", window, p, cfg, args.repeats)
+    direct_cfg = dataclasses.replace(cfg, objects=dataclasses.replace(cfg.objects, parametrization="direct"))
+    direct = run("both (joint, direct eq. 2 factors)", window, p, direct_cfg, args.repeats)
+    print(f"direct / Q CPU time ratio: {direct / both:.1f}")
+    points_cfg = dataclasses.replace(cfg, objects=dataclasses.replace(cfg.objects, motion_points_variable=True))
+    run("both (joint, eq. 4 with object points as variables)", window, p, points_cfg, args.repeats)
+
+
+if __name__ == "__main__":
+    main()

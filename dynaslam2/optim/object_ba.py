@@ -1,0 +1,453 @@
+"""Local bundle adjustment with objects (paper III-D, eq. 1-6), on plain arrays.
+
+Variables (gtsam keys in blocks, `allocate_keys`): keyframe poses T_w_c, static points X_w, one pose
+per object observation (object k seen at keyframe i), one velocity (v_o, w_o) per object observation
+that has a neighbour in time, and the object points X_o stored once in their object frame:
+N' = 6 Nc + 6 Nc No + 3 No Nop (+ 6 per velocity), paper III-C.
+
+Object pose parametrization (`cfg.objects.parametrization`):
+- "camera_in_object" (default): the variable is the camera pose in the object frame Q = T_o_c =
+  T_w_o^-1 T_w_c, so that eq. (2), u - pi(T_c_w T_w_o x_o) = u - pi(Q^-1 x_o), is gtsam's built-in
+  projection factor on (Q, x_o) built in C++ (`add_stereo_projection_factors`); T_w_o = T_w_c Q^-1
+  is recovered afterwards and eq. (4) sees it through (T_w_c, Q). A bijective change of variables
+  for given cameras: same objective, same optimum.
+- "direct": T_w_o is the variable and eq. (2) a Python factor per object observation on
+  (T_w_c, T_w_o, x_o) (object_factors.direct_projection_factor): the reference formulation.
+
+Terms: eq. (1) static reprojection, eq. (2) object reprojection (sigma from the pyramid level),
+eq. (3) velocity smoothness (built-in BetweenFactorVector, sigmas sigma_*_acc * dt), eq. (4)-(5)
+velocity/pose/point coupling (object_factors.motion_factor, sigma sigma_motion_xyz * dt). Huber on
+every term. Reprojection terms follow local_ba's schedule (Huber stage, chi2 outlier removal, stage
+without kernel); eq. (3)-(4) keep their Huber kernel in both stages.
+
+Gauge: the world by the fixed keyframes (the first keyframe when none is fixed and static structure
+is optimized); each object frame by holding (strong prior) its observations at fixed keyframes, or,
+when it has none, its earliest observation in the window: in "camera_in_object" the held variable
+is Q (the object pose relative to that camera), in "direct" T_w_o; the two gauges coincide when the
+anchoring keyframe is fixed.
+
+The three cases of III-D: `optimize_static and not optimize_objects` (camera weak only) is the static
+local BA (`local_bundle_adjustment`, objects untouched); `optimize_objects and not optimize_static`
+(object weak only) frees the object variables and the non-fixed cameras (the caller frees the
+keyframes of the last `cfg.objects.tail_seconds`, `temporal_tail`), the static points being
+constants (one pose-only factor per camera); both: everything jointly.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from dynaslam2.config import OptimConfig
+from dynaslam2.errors import InputError
+from dynaslam2.geometry.camera import StereoCamera
+from dynaslam2.geometry.se3 import inverse
+from dynaslam2.optim.gtsam_utils import (
+    add_stereo_projection_factors,
+    allocate_keys,
+    extract_points,
+    extract_poses,
+    insert_points,
+    insert_poses,
+    lm_params,
+)
+from dynaslam2.optim.local_ba import FIXED_POSE_SIGMA, BAProblem, local_bundle_adjustment
+from dynaslam2.optim.object_factors import direct_projection_factor, motion_factor, motion_residuals
+from dynaslam2.optim.pose_only import pose_only_factor
+from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, is_stereo, residuals
+
+
+@dataclass
+class ObjectBAProblem(BAProblem):
+    """A local BA window with objects: the static `BAProblem` fields plus object observations.
+
+    An object observation f is object `obj_id[f]` seen at keyframe `obj_frames[f]` (at most one per
+    object and keyframe), with pose `T_w_o[f]` and velocity (`v_o[f]`, `w_o[f]`) in its object frame.
+    Object point q (`X_o[q]`, object frame of object `pt_obj[q]`) is observed in object observation
+    `oobs_f[m]` as `oobs_meas[m]` = [u, v, u_right] (u_right < 0: monocular).
+    """
+
+    obj_frames: np.ndarray  # (F,) int keyframe index of each object observation
+    obj_id: np.ndarray  # (F,) int object index
+    T_w_o: np.ndarray  # (F, 4, 4) initial object poses
+    v_o: np.ndarray  # (F, 3) initial linear velocities (object frame, m/s)
+    w_o: np.ndarray  # (F, 3) initial angular velocities (object frame, rad/s)
+    timestamps: np.ndarray  # (K,) keyframe times, s
+    X_o: np.ndarray  # (P2, 3) object points in their object frame
+    pt_obj: np.ndarray  # (P2,) object index of each object point
+    oobs_f: np.ndarray  # (M2,) index into the object observations
+    oobs_pt: np.ndarray  # (M2,) index into X_o
+    oobs_meas: np.ndarray  # (M2, 3)
+    oobs_inv_sigma2: np.ndarray  # (M2,)
+    optimize_static: bool = True  # static points are variables (else constants constraining the cameras)
+    optimize_objects: bool = True  # object poses, velocities and points are variables (else untouched)
+
+
+@dataclass
+class ObjectBAResult:
+    """Optimized window. `inlier` / `obj_inlier`: the static / object observation passes the chi2 and
+    positive-depth tests at the end. Errors: summed Huber costs of all terms (reprojection with the
+    chi2 deltas, eq. 3 and 4 whitened) at the input and at the output. `n_parameters`: degrees of
+    freedom of each variable block in the first stage (paper III-C)."""
+
+    T_c_w: np.ndarray
+    X_w: np.ndarray
+    inlier: np.ndarray
+    T_w_o: np.ndarray
+    v_o: np.ndarray
+    w_o: np.ndarray
+    X_o: np.ndarray
+    obj_inlier: np.ndarray
+    iterations: int
+    initial_error: float
+    final_error: float
+    timings_ms: dict[str, float] = field(default_factory=dict)  # "build", "solve"
+    n_parameters: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class _Estimate:
+    T_c_w: np.ndarray
+    X_w: np.ndarray
+    T_w_o: np.ndarray
+    velocity: np.ndarray  # (F, 6) = (v_o, w_o)
+    X_o: np.ndarray
+
+
+@dataclass
+class _ObjectStructure:
+    """Which object variables take part: observations, points, frame pairs (consecutive in time)."""
+
+    obs: np.ndarray  # (F,) bool: the observation's pose is a variable
+    points: np.ndarray  # (P2,) bool: the point is a variable
+    use: np.ndarray  # (M2,) bool: the observation's reprojection term is used
+    pair_a: np.ndarray  # (R,) earlier observation of each pair
+    pair_b: np.ndarray  # (R,) later observation
+    pair_dt: np.ndarray  # (R,) s
+    moving: np.ndarray  # (F,) bool: the observation has a velocity variable (it belongs to a pair)
+
+
+def temporal_tail(timestamps: np.ndarray, tail_seconds: float) -> np.ndarray:
+    """(K,) bool: keyframes within `tail_seconds` of the newest one (the free cameras of the
+    object-weak BA, paper III-D)."""
+    timestamps = np.asarray(timestamps, dtype=float)
+    return timestamps >= timestamps.max() - tail_seconds
+
+
+def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg: OptimConfig) -> ObjectBAResult:
+    """Bundle adjustment with objects (eq. 6): `cfg.ba_iterations_robust` LM iterations with Huber,
+    removal of reprojection outliers (chi2 > 7.815 stereo / 5.991 mono, or behind the camera), then
+    `cfg.ba_iterations_refine` iterations without kernel on the reprojection terms."""
+    _check(problem)
+    t_start = time.perf_counter()
+    est = _Estimate(problem.T_c_w.astype(float).copy(), problem.X_w.astype(float).copy(),
+                    problem.T_w_o.astype(float).copy(), np.hstack([problem.v_o, problem.w_o]).astype(float),
+                    problem.X_o.astype(float).copy())
+    if problem.optimize_static and not problem.optimize_objects:
+        return _camera_weak_only(problem, est, camera, cfg)
+    fixed = problem.fixed.astype(bool).copy()
+    if problem.optimize_static and not fixed.any():
+        fixed[0] = True
+    th = chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)
+    th_o = chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo)
+    use = np.ones(len(problem.obs_kf), dtype=bool)
+    use_o = np.full(len(problem.oobs_f), problem.optimize_objects)
+    structure = _object_structure(problem, use_o, cfg.objects.min_observation_points)
+    initial_error = _total_cost(problem, est, structure, camera, cfg)
+    timings_ms = {"build": 1e3 * (time.perf_counter() - t_start), "solve": 0.0}
+    iterations = 0
+    n_parameters: dict[str, int] = {}
+    for robust, n_iter in ((True, cfg.ba_iterations_robust), (False, cfg.ba_iterations_refine)):
+        if not robust:
+            c2, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+            use = (c2 <= th) & (depth > cfg.min_depth)
+            if problem.optimize_objects:
+                c2_o, depth_o = _object_chi2_depth(problem, est, camera)
+                use_o = (c2_o <= th_o) & (depth_o > cfg.min_depth)
+            structure = _object_structure(problem, use_o, cfg.objects.min_observation_points)
+        if n_iter == 0:
+            continue
+        t_build = time.perf_counter()
+        graph, values, keys, ordering = _build(problem, est, fixed, use, structure, robust, camera, cfg)
+        if not n_parameters:
+            n_parameters = {name: int(len(members) * dof) for name, (members, _, dof) in keys.items()}
+        if graph.size() == 0:
+            continue
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values,
+                                                      lm_params(cfg, n_iter, cfg.ba_relative_error_tol, ordering))
+        t_solve = time.perf_counter()
+        values = optimizer.optimize()
+        timings_ms["build"] += 1e3 * (t_solve - t_build)
+        timings_ms["solve"] += 1e3 * (time.perf_counter() - t_solve)
+        iterations += optimizer.iterations()
+        _read_back(values, keys, problem, cfg, est)
+
+    est.T_c_w[fixed] = problem.T_c_w[fixed]
+    c2, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+    c2_o, depth_o = _object_chi2_depth(problem, est, camera)
+    return ObjectBAResult(
+        T_c_w=est.T_c_w, X_w=est.X_w, inlier=(c2 <= th) & (depth > cfg.min_depth),
+        T_w_o=est.T_w_o, v_o=est.velocity[:, :3].copy(), w_o=est.velocity[:, 3:].copy(), X_o=est.X_o,
+        obj_inlier=(c2_o <= th_o) & (depth_o > cfg.min_depth), iterations=iterations,
+        initial_error=initial_error, final_error=_total_cost(problem, est, structure, camera, cfg),
+        timings_ms=timings_ms, n_parameters=n_parameters)
+
+
+def _camera_weak_only(problem: ObjectBAProblem, est: _Estimate, camera: StereoCamera,
+                      cfg: OptimConfig) -> ObjectBAResult:
+    """III-D, camera tracking weak only: ORB-SLAM2's local BA on the static structure, objects untouched."""
+    static = local_bundle_adjustment(BAProblem(problem.T_c_w, problem.fixed, problem.X_w, problem.obs_kf,
+                                               problem.obs_pt, problem.meas, problem.inv_sigma2), camera, cfg)
+    est.T_c_w, est.X_w = static.T_c_w, static.X_w
+    c2_o, depth_o = _object_chi2_depth(problem, est, camera)
+    th_o = chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo)
+    return ObjectBAResult(
+        T_c_w=est.T_c_w, X_w=est.X_w, inlier=static.inlier, T_w_o=est.T_w_o, v_o=est.velocity[:, :3].copy(),
+        w_o=est.velocity[:, 3:].copy(), X_o=est.X_o, obj_inlier=(c2_o <= th_o) & (depth_o > cfg.min_depth),
+        iterations=static.iterations, initial_error=static.initial_error, final_error=static.final_error,
+        timings_ms=static.timings_ms, n_parameters={})
+
+
+def _object_structure(problem: ObjectBAProblem, use_o: np.ndarray, min_points: int) -> _ObjectStructure:
+    """Reprojection terms: the used observations of determined points (one stereo or two observations)
+    in object observations with at least `min_points` of them. Every observation of an object with
+    at least one such observation is a variable: one with fewer terms follows the motion model (eq. 3-5)
+    through its neighbours in time. Pairs: consecutive observations of each object."""
+    F, P2 = len(problem.obj_frames), len(problem.X_o)
+    stereo = is_stereo(problem.oobs_meas)
+    strong = np.ones(F, dtype=bool)
+    for _ in range(4):  # observations and points determine each other; a few passes reach the fixed point
+        use = use_o & strong[problem.oobs_f]
+        n_obs = np.bincount(problem.oobs_pt[use], minlength=P2)
+        n_stereo = np.bincount(problem.oobs_pt[use & stereo], minlength=P2)
+        points = (n_obs >= 2) | (n_stereo >= 1)
+        use &= points[problem.oobs_pt]
+        new_strong = strong & (np.bincount(problem.oobs_f[use], minlength=F) >= min_points)
+        if np.array_equal(new_strong, strong):
+            break
+        strong = new_strong
+    use &= strong[problem.oobs_f]
+    points = np.bincount(problem.oobs_pt[use], minlength=P2) > 0
+    tracked = np.zeros(int(problem.obj_id.max(initial=-1)) + 1, dtype=bool)
+    tracked[problem.obj_id[strong]] = True
+    obs = tracked[problem.obj_id]
+    idx = np.flatnonzero(obs)
+    order = idx[np.lexsort((problem.timestamps[problem.obj_frames[idx]], problem.obj_id[idx]))]
+    same = problem.obj_id[order[1:]] == problem.obj_id[order[:-1]]
+    pair_a, pair_b = order[:-1][same], order[1:][same]
+    pair_dt = problem.timestamps[problem.obj_frames[pair_b]] - problem.timestamps[problem.obj_frames[pair_a]]
+    moving = np.zeros(F, dtype=bool)
+    moving[pair_a] = moving[pair_b] = True
+    return _ObjectStructure(obs, points, use, pair_a, pair_b, pair_dt, moving)
+
+
+def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.ndarray, st: _ObjectStructure,
+           robust: bool, camera: StereoCamera, cfg: OptimConfig):
+    """Graph, initial values, {block: (member indices, their keys, dof)}, SCHUR elimination order."""
+    ocfg = cfg.objects
+    direct = ocfg.parametrization == "direct"
+    delta_mono = np.sqrt(cfg.chi2_mono) if robust else None
+    delta_stereo = np.sqrt(cfg.chi2_stereo) if robust else None
+    K = len(est.T_c_w)
+    stereo = is_stereo(problem.meas)
+    # static points: variables (determined ones) or constants in per-camera pose-only factors
+    if problem.optimize_static:
+        n_obs = np.bincount(problem.obs_pt[use], minlength=len(est.X_w))
+        n_st = np.bincount(problem.obs_pt[use & stereo], minlength=len(est.X_w))
+        static_pts = np.flatnonzero((n_obs >= 2) | (n_st >= 1))
+        use = use & np.isin(problem.obs_pt, static_pts)
+    else:
+        static_pts = np.zeros(0, dtype=np.int64)
+    used_kf = np.bincount(problem.obs_kf[use], minlength=K) > 0
+    used_kf |= np.bincount(problem.obj_frames[st.obs], minlength=K) > 0
+    cams = np.flatnonzero(used_kf | fixed)
+    obs_idx, moving_idx, obj_pts = np.flatnonzero(st.obs), np.flatnonzero(st.moving), np.flatnonzero(st.points)
+    cam_keys, obs_keys, spt_keys, opt_keys, vel_keys = allocate_keys(len(cams), len(obs_idx), len(static_pts),
+                                                                    len(obj_pts), len(moving_idx))
+    cam_key = _key_map(K, cams, cam_keys)
+    obs_key = _key_map(len(est.T_w_o), obs_idx, obs_keys)
+    spt_key = _key_map(len(est.X_w), static_pts, spt_keys)
+    opt_key = _key_map(len(est.X_o), obj_pts, opt_keys)
+    vel_key = _key_map(len(est.T_w_o), moving_idx, vel_keys)
+
+    values = gtsam.Values()
+    T_w_c = inverse(est.T_c_w)
+    insert_poses(values, cam_keys, T_w_c[cams])
+    obj_frame = problem.obj_frames[obs_idx]
+    insert_poses(values, obs_keys, est.T_w_o[obs_idx] if direct else inverse(est.T_w_o[obs_idx]) @ T_w_c[obj_frame])
+    insert_points(values, spt_keys, est.X_w[static_pts])
+    insert_points(values, opt_keys, est.X_o[obj_pts])
+    for key, velocity in zip(vel_keys.tolist(), est.velocity[moving_idx]):
+        values.insert(key, velocity)
+
+    graph = gtsam.NonlinearFactorGraph()
+    prior = gtsam.noiseModel.Isotropic.Sigma(6, FIXED_POSE_SIGMA)
+    for key in cam_keys[fixed[cams]].tolist():
+        graph.addPriorPose3(key, values.atPose3(key), prior)
+    # eq. (1)
+    if problem.optimize_static:
+        add_stereo_projection_factors(graph, cam_key[problem.obs_kf[use]], spt_key[problem.obs_pt[use]],
+                                      problem.meas[use], problem.inv_sigma2[use], camera, delta_mono, delta_stereo)
+    else:
+        th = chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)
+        for kf in cams[~fixed[cams]].tolist():
+            sel = use & (problem.obs_kf == kf)
+            if sel.any():
+                graph.push_back(pose_only_factor(int(cam_key[kf]), est.X_w[problem.obs_pt[sel]], problem.meas[sel],
+                                                 problem.inv_sigma2[sel], th[sel] if robust else None, camera,
+                                                 cfg.min_depth))
+    # eq. (2)
+    if direct:
+        for f in obs_idx.tolist():
+            sel = st.use & (problem.oobs_f == f)
+            graph.push_back(direct_projection_factor(
+                int(cam_key[problem.obj_frames[f]]), int(obs_key[f]), opt_key[problem.oobs_pt[sel]],
+                problem.oobs_meas[sel], problem.oobs_inv_sigma2[sel], camera, delta_mono, delta_stereo))
+    elif st.use.any():
+        add_stereo_projection_factors(graph, obs_key[problem.oobs_f[st.use]], opt_key[problem.oobs_pt[st.use]],
+                                      problem.oobs_meas[st.use], problem.oobs_inv_sigma2[st.use], camera,
+                                      delta_mono, delta_stereo)
+    # gauge of each object frame
+    anchored = st.obs & fixed[problem.obj_frames]
+    for k in np.unique(problem.obj_id[obs_idx]).tolist():
+        mine = obs_idx[problem.obj_id[obs_idx] == k]
+        held = mine[anchored[mine]]
+        if len(held) == 0:
+            held = mine[np.argmin(problem.timestamps[problem.obj_frames[mine]])][None]
+        for f in held.tolist():
+            graph.addPriorPose3(int(obs_key[f]), values.atPose3(int(obs_key[f])), prior)
+    # eq. (3) and eq. (4)-(5), per object per consecutive pair of observations
+    huber_velocity = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(ocfg.chi2_velocity))
+    for a, b, dt in zip(st.pair_a.tolist(), st.pair_b.tolist(), st.pair_dt.tolist()):
+        sigmas = np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3)
+        model = gtsam.noiseModel.Robust.Create(huber_velocity, gtsam.noiseModel.Diagonal.Sigmas(sigmas))
+        graph.push_back(gtsam.BetweenFactorVector(int(vel_key[a]), int(vel_key[b]), np.zeros(6), model))
+        pts = obj_pts[problem.pt_obj[obj_pts] == problem.obj_id[a]]
+        if direct:
+            motion_keys = [int(obs_key[a]), int(obs_key[b]), int(vel_key[a])]
+        else:
+            motion_keys = [int(cam_key[problem.obj_frames[a]]), int(cam_key[problem.obj_frames[b]]),
+                           int(obs_key[a]), int(obs_key[b]), int(vel_key[a])]
+        if ocfg.motion_points_variable:
+            graph.push_back(motion_factor(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
+                                          ocfg.chi2_motion, point_keys=opt_key[pts]))
+        else:
+            graph.push_back(motion_factor(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
+                                          ocfg.chi2_motion, X_o=est.X_o[pts].copy()))
+    keys = {"camera": (cams, cam_keys, 6), "object_pose": (obs_idx, obs_keys, 6),
+            "static_point": (static_pts, spt_keys, 3), "object_point": (obj_pts, opt_keys, 3),
+            "velocity": (moving_idx, vel_keys, 6)}
+    # points, then each object's velocities and poses (a clique per object), then the cameras
+    object_keys = np.concatenate([vel_keys, obs_keys])
+    object_of_key = np.concatenate([problem.obj_id[moving_idx], problem.obj_id[obs_idx]])
+    ordering = np.concatenate([spt_keys, opt_keys, object_keys[np.argsort(object_of_key, kind="stable")], cam_keys])
+    return graph, values, keys, ordering
+
+
+def _key_map(n: int, members: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """(n,) gtsam key of each member index, -1 elsewhere."""
+    key = np.full(n, -1, dtype=np.int64)
+    key[members] = keys
+    return key
+
+
+def _read_back(values: gtsam.Values, keys: dict, problem: ObjectBAProblem,
+               cfg: OptimConfig, est: _Estimate) -> None:
+    """Copy the optimized variables into `est` (T_w_o = T_w_c Q^-1 in the camera_in_object form)."""
+    cams, _, _ = keys["camera"]
+    obs_idx, _, _ = keys["object_pose"]
+    static_pts, _, _ = keys["static_point"]
+    obj_pts, _, _ = keys["object_point"]
+    moving_idx, vel_keys, _ = keys["velocity"]
+    poses = extract_poses(values)  # keys in order: cameras, then object poses
+    T_w_c = poses[:len(cams)]
+    est.T_c_w[cams] = inverse(T_w_c)
+    obj_poses = poses[len(cams):]
+    if cfg.objects.parametrization == "direct":
+        est.T_w_o[obs_idx] = obj_poses
+    else:
+        est.T_w_o[obs_idx] = inverse(est.T_c_w[problem.obj_frames[obs_idx]]) @ inverse(obj_poses)
+    # Point3 values in key order (static, then object points); gtsam appends one unset row per
+    # non-3 Vector value (the velocities) after them
+    points = extract_points(values)[:len(static_pts) + len(obj_pts)]
+    est.X_w[static_pts] = points[:len(static_pts)]
+    est.X_o[obj_pts] = points[len(static_pts):]
+    if len(moving_idx):
+        est.velocity[moving_idx] = np.array([values.atVector(k) for k in vel_keys.tolist()])
+
+
+def _static_chi2_depth(problem: ObjectBAProblem, T_c_w: np.ndarray, X_w: np.ndarray,
+                       camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
+    """(M,) chi2 and depth of every static observation."""
+    R = T_c_w[problem.obs_kf, :3, :3]
+    X_c = np.einsum("mij,mj->mi", R, X_w[problem.obs_pt]) + T_c_w[problem.obs_kf, :3, 3]
+    return chi2(residuals(camera, X_c, problem.meas), problem.inv_sigma2), X_c[:, 2]
+
+
+def _object_chi2_depth(problem: ObjectBAProblem, est: _Estimate, camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
+    """(M2,) chi2 and depth of every object-point observation (eq. 2)."""
+    T_c_o = est.T_c_w[problem.obj_frames] @ est.T_w_o
+    T = T_c_o[problem.oobs_f]
+    X_c = np.einsum("mij,mj->mi", T[:, :3, :3], est.X_o[problem.oobs_pt]) + T[:, :3, 3]
+    return chi2(residuals(camera, X_c, problem.oobs_meas), problem.oobs_inv_sigma2), X_c[:, 2]
+
+
+def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, camera: StereoCamera,
+                cfg: OptimConfig) -> float:
+    """Summed Huber cost of eq. (6): reprojection (chi2 thresholds as deltas), eq. (3), eq. (4)."""
+    ocfg = cfg.objects
+    c2, _ = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+    cost = huber_cost(c2, chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)).sum()
+    if not problem.optimize_objects:
+        return float(cost)
+    c2_o, _ = _object_chi2_depth(problem, est, camera)
+    cost += huber_cost(c2_o, chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo))[st.use].sum()
+    for a, b, dt in zip(st.pair_a.tolist(), st.pair_b.tolist(), st.pair_dt.tolist()):
+        sigmas = np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3)
+        r = (est.velocity[b] - est.velocity[a]) / sigmas
+        cost += huber_cost(np.array([r @ r]), ocfg.chi2_velocity)[0]
+        pts = st.points & (problem.pt_obj == problem.obj_id[a])
+        e = motion_residuals(est.T_w_o[a], est.T_w_o[b], est.velocity[a], dt, est.X_o[pts])[0]
+        cost += huber_cost(np.einsum("ij,ij->i", e, e) / (ocfg.sigma_motion_xyz * dt) ** 2, ocfg.chi2_motion).sum()
+    return float(cost)
+
+
+def _check(problem: ObjectBAProblem) -> None:
+    """Shapes, index ranges, one observation per object and keyframe, consistent point ownership."""
+    K, F, P2, M2 = len(problem.T_c_w), len(problem.obj_frames), len(problem.X_o), len(problem.oobs_f)
+    static_ok = (problem.T_c_w.shape == (K, 4, 4) and problem.fixed.shape == (K,)
+                       and problem.X_w.shape[1:] == (3,) and problem.obs_kf.shape == problem.obs_pt.shape
+                       and problem.meas.shape == (len(problem.obs_kf), 3)
+                       and problem.inv_sigma2.shape == (len(problem.obs_kf),))
+    shapes_ok = static_ok and K > 0 and (
+        problem.obj_id.shape == (F,) and problem.T_w_o.shape == (F, 4, 4) and problem.v_o.shape == (F, 3)
+        and problem.w_o.shape == (F, 3) and problem.timestamps.shape == (K,) and problem.X_o.shape == (P2, 3)
+        and problem.pt_obj.shape == (P2,) and problem.oobs_pt.shape == (M2,) and problem.oobs_meas.shape == (M2, 3)
+        and problem.oobs_inv_sigma2.shape == (M2,))
+    if not shapes_ok:
+        raise InputError("object_bundle_adjustment: expected T_c_w (K,4,4), fixed (K,), timestamps (K,), X_w (P,3), "
+                         "obs_kf/obs_pt (M,), meas (M,3), inv_sigma2 (M,), obj_frames/obj_id (F,), T_w_o (F,4,4), "
+                         "v_o/w_o (F,3), X_o (P2,3), pt_obj (P2,), oobs_f/oobs_pt (M2,), oobs_meas (M2,3), "
+                         "oobs_inv_sigma2 (M2,) with K >= 1")
+    P = len(problem.X_w)
+    for name, idx, n in (("obs_kf", problem.obs_kf, K), ("obs_pt", problem.obs_pt, P),
+                         ("obj_frames", problem.obj_frames, K), ("oobs_f", problem.oobs_f, F),
+                         ("oobs_pt", problem.oobs_pt, P2)):
+        if len(idx) and (idx.min() < 0 or idx.max() >= n):
+            raise InputError(f"object_bundle_adjustment: {name} must index [0, {n})")
+    if len(np.unique(problem.obj_id * K + problem.obj_frames)) != F:
+        raise InputError("object_bundle_adjustment: at most one observation per object and keyframe "
+                         "(obj_id, obj_frames)")
+    if np.any(problem.pt_obj[problem.oobs_pt] != problem.obj_id[problem.oobs_f]):
+        raise InputError("object_bundle_adjustment: oobs_pt must be points of the object of oobs_f (pt_obj == obj_id)")
+    arrays = (problem.T_c_w, problem.X_w, problem.meas, problem.T_w_o, problem.v_o, problem.w_o, problem.X_o,
+              problem.oobs_meas, problem.timestamps)
+    if not (all(np.all(np.isfinite(a)) for a in arrays) and np.all(problem.inv_sigma2 > 0)
+            and np.all(problem.oobs_inv_sigma2 > 0)):
+        raise InputError("object_bundle_adjustment: poses, points, velocities, times and measurements must be "
+                         "finite, inv_sigma2 > 0")
+    if len(np.unique(problem.timestamps)) != K:
+        raise InputError("object_bundle_adjustment: the keyframe timestamps must be distinct")
