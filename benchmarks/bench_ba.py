@@ -1,12 +1,15 @@
 """Benchmark of dynaslam2.optim: pose-only optimization and local bundle adjustment (median ms).
 
     python benchmarks/bench_ba.py [--repeats 7] [--set optim.ordering=COLAMD ...] [--pose-builtin]
+        [--compare optim.lambda_fixed_factor=true,optim.linear_solver=SEQUENTIAL_CHOLESKY ...]
 
 Synthetic KITTI-like problems (dynaslam2.optim.synthetic): pose-only with N = 300 and 1000
 correspondences (half stereo, 20% gross outliers); local BA on 10 local + 5 fixed keyframes
 1 m apart, 3000 points seen by up to 7 consecutive keyframes (~14k observations, 5% outliers),
 from a hard (5 cm) and a mild (1 cm, as after tracking) initialization, and 1000 points.
 Wall and CPU (process) time are both printed: the machine is shared, CPU time is the steadier figure.
+`--compare` adds a config variant (comma-separated overrides on top of --set): the BA windows then run
+every variant in turn within each repeat and print its median CPU time as a ratio to the first config.
 `--pose-builtin` also times the pose-only alternative built from gtsam built-in factors only
 (points as variables held by strong priors), to compare with the CustomFactor used.
 """
@@ -83,9 +86,10 @@ def median_ms(fn, repeats: int) -> tuple[float, float, list]:
     return float(np.median(wall)), float(np.median(cpu)), outputs
 
 
-def bench_window(rng: np.random.Generator, cfg: OptimConfig, repeats: int, n_points: int, mild: bool) -> None:
+def bench_window(rng: np.random.Generator, cfgs: list[tuple[str, OptimConfig]], repeats: int, n_points: int,
+                 mild: bool) -> None:
     """Local BA on 10 local + 5 fixed keyframes; `mild`: 1 cm / 0.06 deg / 2 cm initial errors (a window
-    after tracking), else 5 cm / 0.3 deg / 5 cm."""
+    after tracking), else 5 cm / 0.3 deg / 5 cm. The configs run in turn within each repeat."""
     sigmas = dict(pose_sigma=(0.01, 0.001), point_sigma=0.02)
     if not mild:
         sigmas = dict(pose_sigma=(0.05, 0.005), point_sigma=0.05)
@@ -93,17 +97,24 @@ def bench_window(rng: np.random.Generator, cfg: OptimConfig, repeats: int, n_poi
                          outlier_fraction=0.05, **sigmas)
     problem = BAProblem(window.T_c_w_init, window.fixed, window.X_w_init, window.obs_kf, window.obs_pt,
                         window.obs.meas, window.obs.inv_sigma2)
-    wall, cpu, results = median_ms(lambda: local_bundle_adjustment(problem, CAMERA, cfg), repeats)
-    build = np.median([r.timings_ms["build"] for r in results])
-    solve = np.median([r.timings_ms["solve"] for r in results])
-    r = results[-1]
+    runs = [[] for _ in cfgs]
+    for _ in range(repeats):
+        for i, (_, cfg) in enumerate(cfgs):
+            runs[i].append(median_ms(lambda: local_bundle_adjustment(problem, CAMERA, cfg), 1))
+    cpu_first = np.median([run[1] for run in runs[0]])
     free = ~window.fixed
-    t_err = np.linalg.norm((r.T_c_w[free] @ inverse(window.T_c_w_true[free]))[:, :3, 3], axis=1).max()
-    print(f"local BA ({'mild' if mild else 'hard'} init) K={len(problem.T_c_w)} ({int(problem.fixed.sum())} fixed) "
-          f"P={len(problem.X_w)} M={len(problem.obs_kf)}: median {wall:.0f} ms wall, {cpu:.0f} ms CPU "
-          f"(build {build:.0f} ms, LM {solve:.0f} ms, numpy rest {wall - build - solve:.0f} ms wall), "
-          f"{r.iterations} LM iterations, Huber cost {r.initial_error:.0f} -> {r.final_error:.0f}, inliers "
-          f"{r.inlier.mean():.3f}, max keyframe error {100 * t_err:.2f} cm")
+    for (name, _), run in zip(cfgs, runs):
+        wall, cpu = np.median([x[0] for x in run]), np.median([x[1] for x in run])
+        results = [x[2][0] for x in run]
+        build = np.median([r.timings_ms["build"] for r in results])
+        solve = np.median([r.timings_ms["solve"] for r in results])
+        r = results[-1]
+        t_err = np.linalg.norm((r.T_c_w[free] @ inverse(window.T_c_w_true[free]))[:, :3, 3], axis=1).max()
+        print(f"local BA ({'mild' if mild else 'hard'} init) K={len(problem.T_c_w)} ({int(problem.fixed.sum())} "
+              f"fixed) P={len(problem.X_w)} M={len(problem.obs_kf)} [{name}]: median {wall:.0f} ms wall, {cpu:.0f} "
+              f"ms CPU ({cpu / cpu_first:.2f}x) (build {build:.0f} ms, LM {solve:.0f} ms, numpy rest "
+              f"{wall - build - solve:.0f} ms wall), {r.iterations} LM iterations, Huber cost {r.initial_error:.0f} "
+              f"-> {r.final_error:.0f}, inliers {r.inlier.mean():.3f}, max keyframe error {100 * t_err:.2f} cm")
 
 
 def main() -> None:
@@ -112,8 +123,11 @@ def main() -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override optim.key=value")
     parser.add_argument("--pose-builtin", action="store_true", help="also time the built-in-factor pose-only variant")
     parser.add_argument("--skip-pose", action="store_true")
+    parser.add_argument("--compare", action="append", default=[],
+                        help="a config variant for the BA windows: comma-separated optim.key=value overrides")
     args = parser.parse_args()
     cfg = load_config(None, args.overrides).optim
+    cfgs = [("config", cfg)] + [(v, load_config(None, args.overrides + v.split(",")).optim) for v in args.compare]
     rng = np.random.default_rng(0)
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
     if not args.skip_pose:
@@ -129,7 +143,7 @@ def main() -> None:
                 print(f"pose-only N={n}: median {wall:.1f} ms wall, {cpu:.1f} ms CPU (built-in factors, points held "
                       f"by priors)")
     for n_points, mild in ((3000, False), (3000, True), (1000, True)):
-        bench_window(rng, cfg, args.repeats, n_points, mild)
+        bench_window(rng, cfgs, args.repeats, n_points, mild)
 
 if __name__ == "__main__":
     main()

@@ -11,6 +11,7 @@ from dynaslam2.errors import InputError
 from dynaslam2.geometry.se3 import inverse, se3_exp, se3_log, transform
 from dynaslam2.optim import BAProblem, local_bundle_adjustment, optimize_pose
 from dynaslam2.optim.gtsam_utils import (
+    add_stereo_factors,
     add_stereo_projection_factors,
     allocate_keys,
     extract_poses,
@@ -22,7 +23,7 @@ from dynaslam2.optim.gtsam_utils import (
     huber_stereo_noise,
 )
 from dynaslam2.optim.pose_only import pose_only_factor
-from dynaslam2.optim.reprojection import huber_cost
+from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, residuals
 from dynaslam2.optim.synthetic import kitti_like_camera, make_window, observe, perturb_poses, sample_points_in_view
 
 CAMERA = kitti_like_camera()
@@ -135,6 +136,34 @@ def test_projection_pairs_equal_generic_stereo_factor():
     assert np.allclose(matrix_from_pose3(pose3_from_matrix(T_w_c)), T_w_c)
 
 
+def test_stereo_factors_cost_is_orbslam2_huber_cost():
+    """`add_stereo_factors` (GenericStereoFactor3D + pinhole factors): the graph error is the summed Huber cost
+    of the 3-dof (stereo) / 2-dof (mono) chi2 with deltas sqrt(7.815) / sqrt(5.991), as ORB-SLAM2's BA edges;
+    without kernel it equals the C++-built projection pairs."""
+    rng = np.random.default_rng(11)
+    X_w = sample_points_in_view(rng, CAMERA, T_TRUE, 60, (3.0, 40.0))
+    obs = observe(rng, CAMERA, transform(T_TRUE, X_w), rng.random(60) < 0.6, outlier_fraction=0.3)
+    T_w_c = perturb_poses(rng, inverse(T_TRUE), 0.05, 0.01)
+    pose_keys, point_keys = allocate_keys(1, 60)
+    values = gtsam.Values()
+    insert_poses(values, pose_keys, T_w_c[None])
+    insert_points(values, point_keys, X_w)
+    kf = np.zeros(60, int)
+    cfg = OptimConfig()
+    robust = gtsam.NonlinearFactorGraph()
+    add_stereo_factors(robust, kf, point_keys, obs.meas, obs.inv_sigma2, CAMERA, np.sqrt(cfg.chi2_mono),
+                       np.sqrt(cfg.chi2_stereo))
+    c2 = chi2(residuals(CAMERA, transform(inverse(T_w_c), X_w), obs.meas), obs.inv_sigma2)
+    th = chi2_thresholds(obs.meas, cfg.chi2_mono, cfg.chi2_stereo)
+    assert robust.size() == 60 and (c2 > th).sum() >= 10
+    assert np.isclose(robust.error(values), huber_cost(c2, th).sum(), rtol=1e-9)
+    plain, pairs = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
+    add_stereo_factors(plain, kf, point_keys, obs.meas, obs.inv_sigma2, CAMERA, None, None)
+    add_stereo_projection_factors(pairs, kf, point_keys, obs.meas, obs.inv_sigma2, CAMERA, None, None)
+    assert np.isclose(plain.error(values), 0.5 * c2.sum(), rtol=1e-9)
+    assert np.isclose(plain.error(values), pairs.error(values), rtol=1e-9)
+
+
 def ba_problem(seed: int, outlier_fraction: float = 0.0, n_fixed: int = 3, noise_scale: float = 1.0):
     window = make_window(np.random.default_rng(seed), CAMERA, n_keyframes=10, n_fixed=n_fixed, n_points=1000,
                          track_length=5, outlier_fraction=outlier_fraction, pose_sigma=(0.05, 0.005),
@@ -184,6 +213,20 @@ def test_local_ba_noisy_window_and_fixed_keyframes():
     identifiable = np.bincount(problem.obs_pt, minlength=len(problem.X_w))[problem.obs_pt] >= 3
     assert not result.inlier[window.obs.outlier & identifiable].any()
     assert result.inlier[~window.obs.outlier].mean() > 0.9
+
+
+def test_local_ba_lambda_schedules_reach_the_same_optimum():
+    """Nielsen's damping update (the default, fewer rejected LM steps) and gtsam's fixed factor 10 converge
+    to the same window: same inliers, poses within 0.1 mm / 0.001 deg, the same cost within 1e-4.
+    (Both stages run to convergence: a robust stage cut short can classify a few observations differently.)"""
+    _, problem = ba_problem(7, outlier_fraction=0.05)
+    results = [local_bundle_adjustment(problem, CAMERA, OptimConfig(ba_relative_error_tol=0.0, ba_iterations_robust=30,
+                                                                   ba_iterations_refine=60, lambda_fixed_factor=fixed))
+               for fixed in (True, False)]
+    dt, dr = pose_errors(results[1].T_c_w, results[0].T_c_w)
+    assert dt.max() < 1e-4 and dr.max() < 1e-3
+    assert np.array_equal(results[0].inlier, results[1].inlier)
+    assert np.isclose(results[1].final_error, results[0].final_error, rtol=1e-4)
 
 
 def test_local_ba_without_fixed_keyframes_fixes_the_first():

@@ -4,9 +4,14 @@ The problem is plain arrays (`BAProblem`); gtsam stays inside. Keyframe `k` is t
 `T_w_c` at key `pose_keys[k]`, point `j` the Point3 `X_w` at `point_keys[j]` (`allocate_keys`); a
 later block of variables (objects) adds a size to `allocate_keys` and its own factors.
 
-Cost (benchmarks/bench_ba.py, 15 keyframes, 3000 points, 14k observations): building the graph in
-C++ (`add_stereo_projection_factors`) takes ~10% of the time; gtsam's linearization and multifrontal
-elimination (~60-100 ms per LM step for ~2800 variables on this machine) dominate."""
+Cost (benchmarks/bench_ba.py, 15 keyframes, 3000 points, 14k observations, 2 loaded cores): ~300-450 ms
+CPU for 4-5 LM iterations; per LM trial gtsam's sequential Cholesky elimination of ~2850 variables
+(~30-50 ms, points first) dominates, then linearization (~15 ms); building the graphs (`add_stereo_factors`,
+stereo factors made in a Python loop) ~15-20%. Measured and dropped: gtsam's SfmLevenbergMarquardtOptimizer
+(Full and Schur modes, 1.1-2.5x slower), smart factors (SmartProjectionRigFactor with per-level scaled
+calibrations: linearizing 2800 of them costs more than eliminating the points; no Huber), Dogleg (cheaper
+steps, ~30% higher cost after 5), Gauss-Newton (the first step already raises the cost), leaving single
+stereo-observation points out of the graph (no measurable gain)."""
 
 from __future__ import annotations
 
@@ -21,7 +26,7 @@ from dynaslam2.errors import InputError
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
 from dynaslam2.optim.gtsam_utils import (
-    add_stereo_projection_factors,
+    add_stereo_factors,
     allocate_keys,
     extract_points,
     extract_poses,
@@ -119,10 +124,9 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
         prior = gtsam.noiseModel.Isotropic.Sigma(6, FIXED_POSE_SIGMA)
         for key in fixed_keys.tolist():
             graph.addPriorPose3(key, values.atPose3(key), prior)
-        add_stereo_projection_factors(graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]],
-                                      problem.meas[use], problem.inv_sigma2[use], camera,
-                                      np.sqrt(cfg.chi2_mono) if robust else None,
-                                      np.sqrt(cfg.chi2_stereo) if robust else None)
+        add_stereo_factors(graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]], problem.meas[use],
+                           problem.inv_sigma2[use], camera, np.sqrt(cfg.chi2_mono) if robust else None,
+                           np.sqrt(cfg.chi2_stereo) if robust else None)
         params = lm_params(cfg, n_iter, cfg.ba_relative_error_tol, np.concatenate([pt_key[pt_idx], kf_key[kf_idx]]))
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
         t_solve = time.perf_counter()
