@@ -76,6 +76,7 @@ class System:
         self.last_reloc_index = -(10**9)
         self.n_lost = 0
         self.n_frames = 0
+        self.last_inliers = 0
 
     # ------------------------------------------------------------------ helpers
     def _update_last_frame(self) -> None:
@@ -159,6 +160,7 @@ class System:
                 if self.n_lost > cfg.lost_frames_before_new_segment and self._new_segment(frame, T_pred):
                     state, ok, keyframe = "new_segment", True, True
                     n_inliers = len(self.map.keyframes[self.ref_kf_id].matched())
+        self.last_inliers = n_inliers if ok else 0
         if ok:
             if self.last_frame is not None and state in ("ok",) and self.n_lost == 0:
                 self.velocity = rigid(frame.T_c_w @ self.last_frame.T_w_c)
@@ -204,6 +206,9 @@ class System:
         recently = frame.index - self.last_reloc_index < cfg.max_frames
         n_inliers, ref_id = tracker.track_local_map(frame, self.map, state == "relocalized")
         needed = cfg.min_inliers_relocalized if recently else cfg.min_inliers
+        if state == "ok":
+            # A collapse of the inliers against the last frame signals a jump matched by chance.
+            needed = max(needed, cfg.min_inlier_ratio_to_last * self.last_inliers)
         if n_inliers < needed:
             return False, "lost", n_inliers
         if ref_id is not None:
