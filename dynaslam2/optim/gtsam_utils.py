@@ -175,7 +175,7 @@ def add_stereo_factors(
     calib = stereo_calibration(camera)
     level_values, level = np.unique(inv_sigma2[stereo], return_inverse=True)
     models = [huber_stereo_noise(lv, huber_delta_stereo) for lv in level_values.tolist()]
+    push_back, factor, stereo_point = graph.push_back, gtsam.GenericStereoFactor3D, gtsam.StereoPoint2
     for (u, v, u_r), lvl, pose_key, point_key in zip(meas[stereo].tolist(), level.tolist(),
                                                      pose_keys[stereo].tolist(), point_keys[stereo].tolist()):
-        graph.push_back(gtsam.GenericStereoFactor3D(gtsam.StereoPoint2(u, u_r, v), models[lvl], pose_key, point_key,
-                                                    calib))
+        push_back(factor(stereo_point(u, u_r, v), models[lvl], pose_key, point_key, calib))
