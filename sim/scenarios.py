@@ -9,6 +9,10 @@ pedestrians ~1.2-1.6 m/s). Vehicles that follow the ego in its own lane (`follow
 slower than the ego (scale max(object_speed, 1)) so they are not run over. `object_speed=0`
 freezes every other object (those ego-lane leaders excepted) where it is at t = 0.
 
+`n_vehicles`/`n_pedestrians` are totals over the modelled street (the ego's route plus
+`view_ahead`), placed where the ego will see them; a candidate that would overlap another object,
+the ego's clearance or leave the streets is redrawn (up to 40 times) and otherwise dropped, so a
+crowded configuration may hold fewer actors than asked for.
 `parked_fraction` is the fraction of vehicles (and of pedestrians) that never move.
 `occlusion` (0..1) raises the share of large parked vehicles, packs parked vehicles tighter,
 brings moving traffic into the lanes next to the ego and adds street furniture (trees, poles) at
