@@ -21,6 +21,49 @@ from dynaslam2.optim.local_ba import BAProblem, local_bundle_adjustment
 from dynaslam2.tracking.camera import predicted_levels, rigid, transform_points
 
 
+def epipolar_pairs(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndarray,
+                   th2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All (i, j) with keypoint j of image 2 within sqrt(th2[j]) px of the epipolar line of keypoint
+    i of image 1 (ORB-SLAM2's CheckDistEpipolarLine), without the dense N1 x N2 test: every epipolar
+    line passes through the epipole, so lines are angles phi of that pencil (in normalized
+    coordinates); each keypoint j gets the window of angles whose lines can pass within its
+    threshold, and only the pairs inside are tested exactly. x1, x2: (N, 3) homogeneous pixels."""
+    K_inv = np.linalg.inv(K)
+    F21 = K_inv.T @ hat(T_2_1[:3, 3]) @ T_2_1[:3, :3] @ K_inv
+    E21 = hat(T_2_1[:3, 3]) @ T_2_1[:3, :3]
+    x1n, x2n = x1 @ K_inv.T, x2 @ K_inv.T
+    e = T_2_1[:3, 3] / np.linalg.norm(T_2_1[:3, 3])  # epipole in normalized coordinates
+    a_vec = np.cross(e, np.eye(3)[int(np.argmin(np.abs(e)))])
+    a_vec /= np.linalg.norm(a_vec)
+    b_vec = np.cross(e, a_vec)
+    L1n = x1n @ E21.T  # normalized epipolar lines, all through e
+    phi1 = np.mod(np.arctan2(L1n @ b_vec, L1n @ a_vec), np.pi)
+    L2n = np.cross(e[None, :], x2n)  # line through e and each image-2 keypoint
+    phi2 = np.mod(np.arctan2(L2n @ b_vec, L2n @ a_vec), np.pi)
+    # Distance of x2n to the pencil line at phi2 + d is |sin d| |l'(phi2).x2n| / |l(phi2 + d)[:2]| and
+    # |l[:2]| <= m (largest singular value of [a b][:2]): this window cannot miss a pair.
+    c, s_ = np.cos(phi2), np.sin(phi2)
+    dl_phi = -s_[:, None] * a_vec + c[:, None] * b_vec
+    m = np.linalg.norm(np.column_stack([a_vec[:2], b_vec[:2]]), 2)
+    th_n = np.sqrt(th2) / min(K[0, 0], K[1, 1])
+    ratio = th_n * m / np.maximum(np.abs(np.einsum("ij,ij->i", dl_phi, x2n)), 1e-12)
+    half = np.where(ratio < 1.0, np.arcsin(np.minimum(ratio, 1.0)), np.pi / 2)
+    order = np.argsort(phi1, kind="stable")
+    phi_sorted = np.concatenate([phi1[order] - np.pi, phi1[order], phi1[order] + np.pi])
+    idx_sorted = np.tile(order, 3)
+    lo = np.searchsorted(phi_sorted, phi2 - half, side="left")
+    hi = np.searchsorted(phi_sorted, phi2 + half, side="right")
+    count = hi - lo
+    b = np.repeat(np.arange(len(x2)), count)
+    offs = np.arange(len(b)) - np.repeat(np.cumsum(count) - count, count)
+    a = idx_sorted[np.repeat(lo, count) + offs]
+    L1 = x1 @ F21.T  # exact test in pixels
+    num = np.einsum("ij,ij->i", L1[a], x2[b])
+    ok = num**2 < th2[b] * (L1[a, 0] ** 2 + L1[a, 1] ** 2)
+    pair = np.unique(a[ok] * len(x2) + b[ok])  # near the wrap a window can reach a keypoint twice
+    return pair // len(x2), pair % len(x2)
+
+
 class LocalMapper:
     """Builds and refines the map around each new keyframe (state lives in `Map`)."""
 
@@ -111,7 +154,6 @@ class LocalMapper:
         CreateNewMapPoints): epipolar-constrained descriptor matching of unmatched keypoints,
         linear triangulation or stereo back-projection, then depth, reprojection and scale checks."""
         cam = self.camera
-        K_inv = np.linalg.inv(cam.K)
         created = 0
         C1 = kf1.center_w
         for kf2_id in map_.covisible(kf1.id, self.cfg.triangulation_neighbours):
@@ -123,16 +165,11 @@ class LocalMapper:
             i2 = np.flatnonzero((kf2.point_ids < 0) & kf2.static)
             if len(i1) == 0 or len(i2) == 0:
                 continue
-            # Fundamental matrix F21: x2^T F21 x1 = 0.
             T_2_1 = kf2.T_c_w @ kf1.T_w_c
-            F21 = K_inv.T @ hat(T_2_1[:3, 3]) @ T_2_1[:3, :3] @ K_inv
             x1 = np.column_stack([kf1.keypoints.uv[i1].astype(np.float64), np.ones(len(i1))])
             x2 = np.column_stack([kf2.keypoints.uv[i2].astype(np.float64), np.ones(len(i2))])
-            lines = x1 @ F21.T  # (N1, 3) epipolar lines in image 2
-            norm2 = lines[:, 0] ** 2 + lines[:, 1] ** 2
-            num = (lines.astype(np.float32) @ x2.T.astype(np.float32)) ** 2  # (N1, N2)
-            th2 = (3.84 * self.level_sigma2[kf2.keypoints.octave[i2]]).astype(np.float32)
-            a, b = np.nonzero(num < th2[None, :] * norm2[:, None].astype(np.float32))
+            th2 = 3.84 * self.level_sigma2[kf2.keypoints.octave[i2]]
+            a, b = epipolar_pairs(x1, x2, cam.K, T_2_1, th2)
             if len(a) == 0:
                 continue
             dist = hamming_pairs(kf1.keypoints.desc[i1[a]], kf2.keypoints.desc[i2[b]])
