@@ -47,7 +47,8 @@ def epipolar_pairs(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndar
     m = np.linalg.norm(np.column_stack([a_vec[:2], b_vec[:2]]), 2)
     th_n = np.sqrt(th2) / min(K[0, 0], K[1, 1])
     ratio = th_n * m / np.maximum(np.abs(np.einsum("ij,ij->i", dl_phi, x2n)), 1e-12)
-    half = np.where(ratio < 1.0, np.arcsin(np.minimum(ratio, 1.0)), np.pi / 2)
+    # Windows shorter than pi hold each image-1 keypoint once among the three shifted copies.
+    half = np.minimum(np.arcsin(np.minimum(ratio, 1.0)), np.pi / 2 - 1e-9)
     order = np.argsort(phi1, kind="stable")
     phi_sorted = np.concatenate([phi1[order] - np.pi, phi1[order], phi1[order] + np.pi])
     idx_sorted = np.tile(order, 3)
@@ -60,8 +61,7 @@ def epipolar_pairs(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndar
     L1 = x1 @ F21.T  # exact test in pixels
     num = np.einsum("ij,ij->i", L1[a], x2[b])
     ok = num**2 < th2[b] * (L1[a, 0] ** 2 + L1[a, 1] ** 2)
-    pair = np.unique(a[ok] * len(x2) + b[ok])  # near the wrap a window can reach a keypoint twice
-    return pair // len(x2), pair % len(x2)
+    return a[ok], b[ok]
 
 
 class LocalMapper:
