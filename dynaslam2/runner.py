@@ -15,7 +15,8 @@ from dynaslam2.system import System
 def run_sequence(seq_path, mode: str, out, config_path=None, overrides=(), overwrite: bool = False,
                  progress: bool = True) -> Path:
     """Process every frame of the sequence at `seq_path` in `mode`; write `poses.txt`,
-    `status.jsonl`, `timing.csv` into `out` frame by frame (a crash keeps what was written).
+    `status.jsonl`, `timing.csv` (and in `dynamic` mode `objects.jsonl`, `tracks.txt`) into `out`
+    frame by frame (a crash keeps what was written).
 
     Bad input (missing or malformed files, unknown config keys, an unavailable mode) raises InputError
     before anything is written.
@@ -30,6 +31,8 @@ def run_sequence(seq_path, mode: str, out, config_path=None, overrides=(), overw
             for i in range(len(sequence)):
                 estimate = system.process(sequence[i])
                 writer.write_frame(i, estimate.T_w_c, estimate.status(), estimate.timing_ms)
+                if mode == "dynamic":
+                    writer.write_objects(i, estimate.T_w_c, estimate.objects)
                 total_ms += estimate.timing_ms["total"]
                 bar.set_postfix_str(f"{estimate.state}, SLAM {1000.0 * (i + 1) / max(total_ms, 1e-3):.1f} fps",
                                     refresh=False)

@@ -9,15 +9,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dynaslam2.config import SlamConfig
-from dynaslam2.errors import InputError
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
-from dynaslam2.io.types import FrameData
+from dynaslam2.io.types import FrameData, ObjectEstimate
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.map import Map
+from dynaslam2.map.objects import ObjectMap
+from dynaslam2.mapping.objects import object_local_ba
 from dynaslam2.mapping.local_mapping import LocalMapper
 from dynaslam2.tracking.camera import CameraTracker, rigid
 from dynaslam2.tracking.frontend import FrameBuilder
+from dynaslam2.tracking.objects import ObjectTracker
 from dynaslam2.tracking.relocalization import relocalize
 
 STATES = ("init", "ok", "lost", "relocalized", "new_segment")
@@ -39,6 +41,7 @@ class FrameEstimate:
     timing_ms: dict[str, float]
     segment: int = 0
     mapping_ms: dict[str, float] = field(default_factory=dict)
+    objects: list[ObjectEstimate] = field(default_factory=list)  # `dynamic` mode: objects seen in this frame
 
     def status(self) -> dict:
         """The status record of the results files (DESIGN.md status.jsonl)."""
@@ -50,14 +53,11 @@ class System:
     """Stereo / RGB-D SLAM. `process(frame)` per frame, in order; deterministic.
 
     Modes: `static` uses every feature, `masked` never extracts features on (dilated) dynamic-class
-    instances; `dynamic` (object tracking, issue 4) is refused until it exists. Features carry their
-    instance and class ids (`Frame.instance_id`, `Frame.class_id`, `Frame.static`) for it.
+    instances; `dynamic` keeps the features of dynamic-class instances off the static map and tracks
+    objects with them (`ObjectTracker`, paper III-B to III-D; `self.objects`).
     """
 
     def __init__(self, config: SlamConfig, camera: StereoCamera) -> None:
-        if config.mode == "dynamic":
-            raise InputError("mode 'dynamic' (multi-object tracking) is not implemented yet; "
-                             "use --mode masked or --mode static")
         self.config = config
         self.camera = camera
         self.frontend = FrameBuilder(config, camera)
@@ -65,6 +65,9 @@ class System:
         self.tracker = CameraTracker(config, camera, ext.scale_factors, ext.inv_level_sigma2)
         self.mapper = LocalMapper(config, camera, ext.scale_factors)
         self.map = Map(segment=0)
+        self.objects = ObjectMap()
+        self.object_tracker = (ObjectTracker(config, camera, ext.scale_factors, ext.inv_level_sigma2)
+                               if config.mode == "dynamic" else None)
         self.initialized = False
         self.last_frame: Frame | None = None
         self.velocity: np.ndarray | None = None  # T_c_l: last camera -> current camera
@@ -141,14 +144,18 @@ class System:
         else:
             ok, state, n_inliers = self._track(frame, T_pred)
             if ok:
+                object_weak = self._track_objects(frame, data, timing)
                 ref = self.map.keyframes.get(self.ref_kf_id)
-                if ref is not None and self.tracker.need_new_keyframe(
-                        frame, self.map, ref, n_inliers, frame.index - self.last_kf_index,
-                        frame.index - self.last_reloc_index):
+                camera_weak = ref is not None and self.tracker.need_new_keyframe(
+                    frame, self.map, ref, n_inliers, frame.index - self.last_kf_index,
+                    frame.index - self.last_reloc_index)
+                object_weak = [] if frame.index - self.last_kf_index < self.config.objects.kf_min_frames \
+                    else object_weak
+                if camera_weak or object_weak:
                     kf = self.mapper.create_keyframe(frame, self.map, cfg.new_points_min)
                     t_map = time.perf_counter()
-                    timing["tracking"] = (t_map - t_track) * 1e3
-                    mapping_ms = self.mapper.process(kf, self.map)
+                    timing["tracking"] = (t_map - t_track) * 1e3 - timing["objects"]
+                    mapping_ms = self._local_mapping(frame, kf, camera_weak, object_weak)
                     timing["local_ba"] = (time.perf_counter() - t_map) * 1e3
                     self.ref_kf_id = kf.id
                     self.last_kf_index = frame.index
@@ -172,15 +179,42 @@ class System:
         else:
             self.last_T_c_r, self.last_ref_id = None, None
         if not keyframe:
-            timing["tracking"] = (time.perf_counter() - t_track) * 1e3
+            timing["tracking"] = (time.perf_counter() - t_track) * 1e3 - timing["objects"]
         self.last_frame = frame
         self.n_frames += 1
+        objects = (self.object_tracker.estimates(self.objects, frame.index)
+                   if self.object_tracker is not None and ok else [])
         timing["total"] = (time.perf_counter() - t_start) * 1e3
         return FrameEstimate(
             index=data.index, T_w_c=inverse(frame.T_c_w), state=state, n_static_matches=int(n_inliers),
-            n_dynamic_matches=0, keyframe=keyframe, timing_ms=timing, segment=self.map.segment,
-            mapping_ms=mapping_ms,
+            n_dynamic_matches=sum(o.n_points for o in objects), keyframe=keyframe, timing_ms=timing,
+            segment=self.map.segment, mapping_ms=mapping_ms, objects=objects,
         )
+
+    def _track_objects(self, frame: Frame, data: FrameData, timing: dict[str, float]) -> list[int]:
+        """`dynamic` mode: track the objects of a frame whose camera is tracked; returns the ids of
+        weakly tracked objects (III-D)."""
+        if self.object_tracker is None:
+            return []
+        t0 = time.perf_counter()
+        weak = self.object_tracker.track(frame, data.instances, self.objects).weak
+        timing["objects"] = (time.perf_counter() - t0) * 1e3
+        return weak
+
+    def _local_mapping(self, frame: Frame, kf, camera_weak: bool, object_weak: list[int]) -> dict[str, float]:
+        """Local mapping of a new keyframe with the BA case of III-D: camera weak only -> the static
+        local BA; an object weak -> BA with objects (object-weak only: the weak objects and the
+        cameras of the last `optim.objects.tail_seconds`; both: everything jointly)."""
+        if self.object_tracker is None:
+            return self.mapper.process(kf, self.map)
+        self.object_tracker.on_keyframe(frame, kf.id, self.objects, object_weak)
+        with_objects = bool(object_weak) and self.config.objects.ba
+        mapping_ms = self.mapper.process(kf, self.map, static_ba=not with_objects)
+        if with_objects:
+            t0 = time.perf_counter()
+            object_local_ba(kf, self.map, self.objects, object_weak, camera_weak, self.mapper, self.config)
+            mapping_ms["ba"] = mapping_ms.get("ba", 0.0) + (time.perf_counter() - t0) * 1e3
+        return mapping_ms
 
     def _track(self, frame: Frame, T_pred: np.ndarray) -> tuple[bool, str, int]:
         """Camera tracking of an initialized system: (success, state, inliers)."""

@@ -1,0 +1,122 @@
+"""Local bundle adjustment with objects on a new keyframe (paper III-D): assembles the window from
+the static map and the object map, runs `optim.object_ba.object_bundle_adjustment`, writes back.
+
+Cases (the camera-weak-only case is the static local BA of `LocalMapper.local_ba`):
+- object weak only: the weak objects' poses, velocities and points, and the keyframes that observe
+  them within the last `optim.objects.tail_seconds` (free), the static points they see held constant;
+- camera and object weak: the static local window (the new keyframe and its covisible keyframes,
+  free; the keyframes outside it that see its points most, fixed), its points, and every object
+  observed in those keyframes, jointly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dynaslam2.config import SlamConfig
+from dynaslam2.map.keyframe import KeyFrame
+from dynaslam2.map.map import Map
+from dynaslam2.map.objects import ObjectMap, ObjectObservation
+from dynaslam2.optim.object_ba import ObjectBAProblem, object_bundle_adjustment
+from dynaslam2.tracking.camera import rigid
+
+
+def _static_window(kf: KeyFrame, map_: Map, config: SlamConfig) -> tuple[list[int], list[int], np.ndarray]:
+    """(free keyframe ids, fixed keyframe ids, point ids) of the static local window around `kf`."""
+    cfg = config.mapping
+    local = [kf.id] + map_.covisible(kf.id, cfg.ba_max_keyframes - 1)
+    pts = map_.points_of_keyframes(local)
+    obs_kf, _, _ = map_.observers(pts)
+    ids_out, counts = np.unique(obs_kf[~np.isin(obs_kf, local)], return_counts=True)
+    fixed = sorted(ids_out[np.lexsort((ids_out, -counts))[: cfg.ba_max_fixed_keyframes]].tolist())
+    if min(map_.keyframes) in local:
+        local.remove(min(map_.keyframes))
+        fixed = sorted(fixed + [min(map_.keyframes)])
+    return local, fixed, pts
+
+
+def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int], camera_weak: bool,
+                    mapper, config: SlamConfig) -> dict[str, int]:
+    """BA with objects for keyframe `kf` (module docstring); returns the parameter counts of the window
+    (empty when there was nothing to optimize). `mapper`: the `LocalMapper` (camera, pyramid sigmas)."""
+    tail = config.optim.objects.tail_seconds
+    if camera_weak:
+        free_ids, fixed_ids, pts = _static_window(kf, map_, config)
+        window = set(free_ids) | set(fixed_ids)
+        tracks = [t for t in objects.tracks.values() if any(o.kf_id in window for o in t.observations)]
+    else:
+        tracks = [objects.tracks[t] for t in weak]
+        free_ids = sorted({o.kf_id for t in tracks for o in t.observations
+                           if o.kf_id in map_.keyframes and o.timestamp >= kf.timestamp - tail})
+        fixed_ids, pts = [], np.zeros(0, dtype=np.int64)
+    all_ids = list(free_ids) + list(fixed_ids)
+    if not all_ids or not tracks:
+        return {}
+    kf_index = {k: i for i, k in enumerate(all_ids)}
+    # Object observations in the window and their points (each object's points once).
+    obs_list: list[tuple[int, ObjectObservation]] = []
+    for k, tr in enumerate(tracks):
+        obs_list += [(k, o) for o in tr.observations if o.kf_id in kf_index]
+    if not obs_list:
+        return {}
+    P = objects.points
+    oobs_f, oobs_kp_pt = [], []
+    for f, (_, o) in enumerate(obs_list):
+        alive = P.alive[o.pt_ids]
+        o.kp_idx, o.pt_ids = o.kp_idx[alive], o.pt_ids[alive]
+        oobs_f.append(np.full(len(o.pt_ids), f))
+        oobs_kp_pt.append(o.pt_ids)
+    oobs_f = np.concatenate(oobs_f)
+    opt_ids = np.concatenate(oobs_kp_pt)
+    obj_pts, oobs_pt = np.unique(opt_ids, return_inverse=True)
+    track_row = {tr.track_id: k for k, tr in enumerate(tracks)}
+    oobs_meas = np.concatenate([map_.keyframes[o.kf_id].measurements(o.kp_idx) for _, o in obs_list])
+    oobs_inv_sigma2 = np.concatenate([mapper.inv_level_sigma2[map_.keyframes[o.kf_id].keypoints.octave[o.kp_idx]]
+                                      for _, o in obs_list])
+    # Static observations of the window keyframes (variables when camera_weak, constants otherwise).
+    if not camera_weak:
+        pts = map_.points_of_keyframes(all_ids)
+    obs_kf, obs_pt, obs_kp = map_.observers(pts)
+    keep = np.isin(obs_kf, all_ids)
+    obs_kf, obs_pt, obs_kp = obs_kf[keep], obs_pt[keep], obs_kp[keep]
+    meas = np.empty((len(obs_kf), 3))
+    inv_sigma2 = np.empty(len(obs_kf))
+    for k in np.unique(obs_kf).tolist():
+        m = obs_kf == k
+        meas[m] = map_.keyframes[k].measurements(obs_kp[m])
+        inv_sigma2[m] = mapper.inv_level_sigma2[map_.keyframes[k].keypoints.octave[obs_kp[m]]]
+    pt_index = np.full(map_.points.size, -1, dtype=np.int64)
+    pt_index[pts] = np.arange(len(pts))
+    problem = ObjectBAProblem(
+        T_c_w=np.stack([map_.keyframes[k].T_c_w for k in all_ids]),
+        fixed=np.array([False] * len(free_ids) + [True] * len(fixed_ids)),
+        X_w=map_.points.X_w[pts].copy(), obs_kf=np.array([kf_index[k] for k in obs_kf.tolist()], dtype=np.int64),
+        obs_pt=pt_index[obs_pt], meas=meas, inv_sigma2=inv_sigma2,
+        obj_frames=np.array([kf_index[o.kf_id] for _, o in obs_list]),
+        obj_id=np.array([k for k, _ in obs_list]),
+        T_w_o=np.stack([o.T_w_o for _, o in obs_list]),
+        v_o=np.stack([o.v_o for _, o in obs_list]), w_o=np.stack([o.w_o for _, o in obs_list]),
+        timestamps=np.array([map_.keyframes[k].timestamp for k in all_ids]),
+        X_o=P.X_o[obj_pts].copy(), pt_obj=np.array([track_row[int(t)] for t in P.track[obj_pts]]),
+        oobs_f=oobs_f, oobs_pt=oobs_pt, oobs_meas=oobs_meas, oobs_inv_sigma2=oobs_inv_sigma2,
+        optimize_static=camera_weak, optimize_objects=True,
+    )
+    result = object_bundle_adjustment(problem, mapper.camera, config.optim)
+    if not all(np.all(np.isfinite(a)) for a in (result.T_c_w, result.X_w, result.T_w_o, result.X_o)):
+        return {}
+    for i, k in enumerate(free_ids):
+        map_.keyframes[k].T_c_w = rigid(result.T_c_w[i])
+    P.X_o[obj_pts] = result.X_o
+    for f, (_, o) in enumerate(obs_list):
+        o.T_w_o = rigid(result.T_w_o[f])
+        o.v_o, o.w_o = result.v_o[f].copy(), result.w_o[f].copy()
+        good = result.obj_inlier[oobs_f == f]
+        o.kp_idx, o.pt_ids = o.kp_idx[good], o.pt_ids[good]
+    if camera_weak:
+        map_.points.X_w[pts] = result.X_w
+        out = np.flatnonzero(~np.asarray(result.inlier, dtype=bool))
+        for k in np.unique(obs_kf[out]).tolist():
+            map_.erase_observations(map_.keyframes[k], obs_kp[out][obs_kf[out] == k])
+        map_.cull_points(pts[map_.points.n_obs[pts] <= 0])
+        map_.update_point_descriptors_and_normals(pts, mapper.scale_factors)
+    return result.n_parameters

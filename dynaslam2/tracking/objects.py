@@ -1,0 +1,417 @@
+"""Object tracking of the `dynamic` mode (paper III-B, III-D): association of the dynamic features
+with the object points of the map, object pose (constant-velocity prediction, eq. 5, refined by
+object pose-only optimization), object creation, track ids, weak-tracking keyframes.
+
+Per frame, after the camera is tracked on static features only:
+(a) objects with a known velocity: their points are projected under the eq. (5) prediction and
+    matched by projection search;
+(b) the others, or those with too few matches in (a): brute-force matching of their points with the
+    keypoints of the instance that overlaps their last 2D box most (consecutive frames);
+then one pose-only optimization per object; an instance holds at most one object.
+Unclaimed instances with enough close keypoints with depth become objects, unless their keypoints
+mostly match the points of one map object not seen in this frame (it re-appears: same track id, so
+occlusions keep ids, the matching being against the map, not the previous frame) or their box
+overlaps the box of an object seen in the previous frame (instance-to-instance IoU association).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynaslam2.classes import CLASS_IDS, CLASS_NAMES, DYNAMIC_CLASSES
+from dynaslam2.config import SlamConfig
+from dynaslam2.eval.objects import box_iou
+from dynaslam2.features.matcher import match_descriptors, search_by_projection
+from dynaslam2.geometry.camera import StereoCamera
+from dynaslam2.geometry.se3 import inverse, make_pose
+from dynaslam2.io.types import ObjectEstimate, velocity_to_world
+from dynaslam2.map.frame import Frame
+from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
+from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, predict_object_pose
+
+DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
+
+
+@dataclass
+class ObjectFrameResult:
+    """Objects of one frame: estimates (one per object seen), inlier dynamic matches, and the ids of
+    objects whose tracking is weak (III-D: they ask for a keyframe)."""
+
+    estimates: list[ObjectEstimate]
+    n_matches: int
+    weak: list[int]
+
+
+def dynamic_keypoints(frame: Frame) -> np.ndarray:
+    """(N,) bool: keypoints on dynamic-class instances, kept off the static map."""
+    return ~frame.static & (frame.instance_id > 0) & np.isin(frame.class_id, DYNAMIC_CLASS_IDS)
+
+
+def instance_boxes(instances: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """(K, 4) boxes (left, top, right, bottom) in px of the masks of instance ids `ids` (NaN if absent)."""
+    boxes = np.full((len(ids), 4), np.nan)
+    if len(ids) == 0:
+        return boxes
+    rows, cols = np.nonzero(np.isin(instances, ids))
+    lab = instances[rows, cols].astype(np.int64)
+    order = np.argsort(lab, kind="stable")
+    lab, rows, cols = lab[order], rows[order], cols[order]
+    starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]]) if len(lab) else np.zeros(0, np.int64)
+    if len(starts) == 0:
+        return boxes
+    k = np.searchsorted(ids, lab[starts])
+    boxes[k] = np.column_stack([np.minimum.reduceat(cols, starts), np.minimum.reduceat(rows, starts),
+                                np.maximum.reduceat(cols, starts), np.maximum.reduceat(rows, starts)])
+    return boxes
+
+
+def rigid_fit(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) least-squares rigid T with B ~ T A (Kabsch), batched over (..., N, 3) point sets."""
+    ca, cb = A.mean(-2, keepdims=True), B.mean(-2, keepdims=True)
+    H = np.swapaxes(A - ca, -1, -2) @ (B - cb)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, -1, -2) @ np.swapaxes(U, -1, -2)))
+    D = np.zeros(H.shape)
+    D[..., 0, 0] = D[..., 1, 1] = 1.0
+    D[..., 2, 2] = d
+    R = np.swapaxes(Vt, -1, -2) @ D @ np.swapaxes(U, -1, -2)
+    t = cb[..., 0, :] - np.einsum("...ij,...j->...i", R, ca[..., 0, :])
+    return make_pose(R, t)
+
+
+def ransac_rigid(A: np.ndarray, B: np.ndarray, hypotheses: int, inlier_m: float,
+                 rng: np.random.Generator) -> tuple[np.ndarray | None, np.ndarray]:
+    """Robust rigid T with B ~ T A from 3D-3D matches: minimal 3-point hypotheses (vectorized), the
+    one with most inliers (distance < inlier_m) refitted on its inliers. (None, all False) if < 3."""
+    n = len(A)
+    if n < 3:
+        return None, np.zeros(n, bool)
+    idx = np.stack([rng.choice(n, 3, replace=False) for _ in range(hypotheses)])
+    T = rigid_fit(A[idx], B[idx])
+    pred = np.einsum("hij,nj->hni", T[:, :3, :3], A) + T[:, None, :3, 3]
+    inl = np.linalg.norm(pred - B[None], axis=2) < inlier_m
+    best = int(np.argmax(inl.sum(1)))
+    mask = inl[best]
+    if mask.sum() < 3:
+        return None, mask
+    T_best = rigid_fit(A[mask], B[mask])
+    mask = np.linalg.norm(A @ T_best[:3, :3].T + T_best[:3, 3] - B, axis=1) < inlier_m
+    return T_best, mask
+
+
+class ObjectTracker:
+    """Algorithms of object tracking; the state lives in `ObjectMap` (and the frame)."""
+
+    def __init__(self, config: SlamConfig, camera: StereoCamera, scale_factors: np.ndarray,
+                 inv_level_sigma2: np.ndarray) -> None:
+        self.config = config
+        self.cfg = config.objects
+        self.camera = camera
+        self.scale_factors = np.asarray(scale_factors, dtype=np.float64)
+        self.inv_level_sigma2 = np.asarray(inv_level_sigma2, dtype=np.float64)
+
+    # ------------------------------------------------------------------ pieces
+    def predicted_pose(self, track: ObjectTrack, timestamp: float) -> np.ndarray:
+        """T_w_o at `timestamp`: constant velocity (eq. 5) if known, else the last pose."""
+        last = track.last
+        if not track.velocity_known:
+            return last.T_w_o.copy()
+        return predict_object_pose(last.T_w_o, last.v_o, last.w_o, timestamp - last.timestamp)
+
+    def _world_points(self, frame: Frame, kp: np.ndarray) -> np.ndarray:
+        return frame.unproject(kp, self.camera)
+
+    def _close(self, frame: Frame, kp: np.ndarray) -> np.ndarray:
+        """Keypoints among `kp` with stereo depth closer than max_point_depth_m."""
+        d = frame.depth[kp]
+        return kp[(d > 0) & (d <= self.cfg.max_point_depth_m)]
+
+    def _compact(self, X: np.ndarray) -> np.ndarray:
+        """Mask of points within max_point_spread_m of their median (drops mask-border background)."""
+        if len(X) == 0:
+            return np.zeros(0, bool)
+        return np.linalg.norm(X - np.median(X, axis=0), axis=1) <= self.cfg.max_point_spread_m
+
+    def estimate_pose(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_init: np.ndarray,
+                      kp: np.ndarray, pts: np.ndarray, robust_init: bool) -> tuple[np.ndarray, np.ndarray] | None:
+        """Object pose-only optimization (III-B) of `track` from matches keypoint `kp` <-> point `pts`;
+        with `robust_init` the start comes from a 3D-3D RANSAC on the stereo depths. Returns (T_w_o,
+        inlier mask) or None when too few inliers or the implied speed is not physical."""
+        cfg = self.cfg
+        X_o = objects.points.X_o[pts]
+        if robust_init:
+            has_depth = frame.depth[kp] > 0
+            if np.count_nonzero(has_depth) >= 3:
+                rng = np.random.default_rng(frame.index * 1009 + track.track_id)
+                T, _ = ransac_rigid(X_o[has_depth], self._world_points(frame, kp[has_depth]),
+                                    cfg.ransac_hypotheses, cfg.ransac_inlier_m, rng)
+                if T is not None:
+                    T_init = T
+        meas = frame.measurements(kp)
+        inv_sigma2 = self.inv_level_sigma2[frame.keypoints.octave[kp]]
+        T_w_o, inliers = optimize_object_pose(frame.T_c_w, T_init, X_o, meas, inv_sigma2, self.camera,
+                                              self.config.optim)
+        inliers = np.asarray(inliers, dtype=bool)
+        if not np.all(np.isfinite(T_w_o)) or np.count_nonzero(inliers) < cfg.min_inliers:
+            return None
+        dt = frame.timestamp - track.last.timestamp
+        if dt > 0 and np.linalg.norm(T_w_o[:3, 3] - track.last.T_w_o[:3, 3]) > cfg.max_speed_mps * dt:
+            return None
+        return T_w_o, inliers
+
+    # ------------------------------------------------------------------ main
+    def track(self, frame: Frame, instances: np.ndarray | None, objects: ObjectMap) -> ObjectFrameResult:
+        """Track the objects of `frame` (camera pose already estimated), create new ones; see the
+        module docstring for the order of the steps."""
+        cfg = self.cfg
+        t = frame.timestamp
+        dyn = dynamic_keypoints(frame)
+        free = dyn.copy()  # dynamic keypoints not yet given to an object
+        inst_ids = np.unique(frame.instance_id[dyn])
+        boxes = (instance_boxes(instances, inst_ids) if instances is not None
+                 else self._keypoint_boxes(frame, dyn, inst_ids))
+        active = [tr for tr in objects.tracks.values()
+                  if tr.last.frame_index < frame.index and t - tr.last.timestamp <= cfg.max_lost_s]
+        pred = {tr.track_id: self.predicted_pose(tr, t) for tr in active}
+        candidates = self._search_projection(frame, objects, [tr for tr in active if tr.velocity_known], pred, dyn)
+        for tr in active:
+            if tr.track_id not in candidates:
+                match = self._search_overlap(frame, objects, tr, dyn, inst_ids, boxes)
+                if match is not None:
+                    candidates[tr.track_id] = match
+        # Pose per object, the best supported first; an instance holds one object.
+        claimed: set[int] = set()
+        seen: list[int] = []
+        for tid in sorted(candidates, key=lambda k: (-len(candidates[k][0]), k)):
+            tr = objects.tracks[tid]
+            kp, pts = candidates[tid]
+            ok = free[kp]
+            kp, pts = kp[ok], pts[ok]
+            if len(kp) < cfg.min_inliers:
+                continue
+            est = self.estimate_pose(frame, objects, tr, pred[tid], kp, pts, robust_init=not tr.velocity_known)
+            if est is None:
+                continue
+            T_w_o, inl = est
+            inst = int(np.bincount(np.searchsorted(inst_ids, frame.instance_id[kp[inl]])).argmax())
+            if int(inst_ids[inst]) in claimed:
+                continue
+            claimed.add(int(inst_ids[inst]))
+            self._observe(frame, objects, tr, T_w_o, kp[inl], pts[inl], int(inst_ids[inst]), boxes[inst])
+            free[kp[inl]] = False
+            seen.append(tid)
+        # Unclaimed instances: re-appearing objects or new ones.
+        for k, inst in enumerate(inst_ids.tolist()):
+            if inst in claimed:
+                continue
+            tid = self._new_object(frame, objects, [tr for tr in active if tr.track_id not in seen], pred,
+                                   inst, boxes[k], boxes, free)
+            if tid is not None:
+                seen.append(tid)
+                claimed.add(inst)
+        self._cull(objects, seen)
+        return self._result(frame, objects, seen, dyn)
+
+    def _keypoint_boxes(self, frame: Frame, dyn: np.ndarray, inst_ids: np.ndarray) -> np.ndarray:
+        """Boxes of each instance's keypoints (when the instance image is not given)."""
+        boxes = np.full((len(inst_ids), 4), np.nan)
+        for k, inst in enumerate(inst_ids.tolist()):
+            uv = frame.keypoints.uv[dyn & (frame.instance_id == inst)]
+            boxes[k] = [*uv.min(0), *uv.max(0)]
+        return boxes
+
+    def _search_projection(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack],
+                           pred: dict[int, np.ndarray], dyn: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """(a): project the points of all `tracks` under their predicted poses, one projection search."""
+        if not tracks:
+            return {}
+        ids = np.array([tr.track_id for tr in tracks])
+        pts = objects.points.of_tracks(ids)
+        if len(pts) == 0:
+            return {}
+        row = np.searchsorted(np.sort(ids), objects.points.track[pts])
+        T_c_o = frame.T_c_w[None] @ np.stack([pred[i] for i in np.sort(ids).tolist()])
+        T = T_c_o[row]
+        X_c = np.einsum("nij,nj->ni", T[:, :3, :3], objects.points.X_o[pts]) + T[:, :3, 3]
+        z = X_c[:, 2]
+        zs = np.where(z > 1e-6, z, 1.0)
+        cam = self.camera
+        uv = np.column_stack([cam.fx * X_c[:, 0] / zs + cam.cx, cam.fy * X_c[:, 1] / zs + cam.cy])
+        vis = (z > 1e-6) & cam.in_image(uv)
+        pts, uv, zs = pts[vis], uv[vis], zs[vis]
+        objects.points.n_visible[pts] += 1
+        match = search_by_projection(
+            frame.keypoints, uv, objects.points.desc[pts], np.full(len(pts), self.cfg.projection_radius), None,
+            uv[:, 0] - cam.bf / zs, frame.u_right, self.config.matcher.th_high, self.cfg.projection_nn_ratio,
+            False, available=dyn)
+        m = match >= 0
+        out = {}
+        owner = objects.points.track[pts]
+        for tid in ids.tolist():
+            sel = m & (owner == tid)
+            if np.count_nonzero(sel) >= self.cfg.min_projection_matches:
+                out[tid] = (match[sel].astype(np.int64), pts[sel])
+        return out
+
+    def _search_overlap(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, dyn: np.ndarray,
+                        inst_ids: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """(b): brute-force matching of the object's points with the keypoints of the instance that
+        overlaps its last box most (the object was seen in the previous frames)."""
+        cfg = self.cfg
+        last = track.last
+        if frame.timestamp - last.timestamp > cfg.max_velocity_gap_s or last.box2d is None or len(inst_ids) == 0:
+            return None
+        iou = box_iou(np.array([last.box2d]), boxes)[0]
+        k = int(np.argmax(iou))
+        if iou[k] < cfg.min_overlap_iou:
+            return None
+        kp = np.flatnonzero(dyn & (frame.instance_id == inst_ids[k]))
+        pts = objects.points.of_track(track.track_id)
+        m = match_descriptors(objects.points.desc[pts], frame.keypoints.desc[kp], cfg.bf_max_distance, cfg.bf_nn_ratio)
+        if len(m) < cfg.min_inliers:
+            return None
+        return kp[m[:, 1]], pts[m[:, 0]]
+
+    def _observe(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o: np.ndarray, kp: np.ndarray,
+                 pts: np.ndarray, instance_id: int, box: np.ndarray, velocity: bool = True) -> None:
+        """Record the observation of `track` at `frame`, its velocity from the last observation
+        (inverse of eq. 5) when the two are close in time, and refresh the matched points."""
+        last = track.observations[-1] if track.observations else None
+        v_o, w_o = np.zeros(3), np.zeros(3)
+        known = False
+        if last is not None:
+            dt = frame.timestamp - last.timestamp
+            if velocity and 0 < dt <= self.cfg.max_velocity_gap_s:
+                v_o, w_o = object_velocity(last.T_w_o, T_w_o, dt)
+                known = True
+            elif not velocity:
+                v_o, w_o, known = last.v_o.copy(), last.w_o.copy(), track.velocity_known
+        box2d = None if not np.all(np.isfinite(box)) else tuple(float(b) for b in box)
+        track.observations.append(ObjectObservation(
+            frame_index=frame.index, timestamp=frame.timestamp, T_w_o=T_w_o, v_o=v_o, w_o=w_o,
+            instance_id=instance_id, kp_idx=kp.astype(np.int64), pt_ids=pts.astype(np.int64), box2d=box2d))
+        track.velocity_known = known
+        P = objects.points
+        P.desc[pts] = frame.keypoints.desc[kp]
+        P.n_found[pts] += 1
+
+    def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
+                    inst: int, box: np.ndarray, boxes: np.ndarray, free: np.ndarray) -> int | None:
+        """An unclaimed instance: joins an unseen track (point votes, then box IoU with the previous
+        frame) or creates an object at the centroid of its points with identity rotation (III-B)."""
+        cfg = self.cfg
+        kp = self._close(frame, np.flatnonzero(free & (frame.instance_id == inst)))
+        if len(kp) < cfg.min_new_points:
+            return None
+        X_w = self._world_points(frame, kp)
+        ok = self._compact(X_w)
+        kp, X_w = kp[ok], X_w[ok]
+        if len(kp) < cfg.min_new_points:
+            return None
+        # Track ids from point votes: most matched keypoints belong to one map object.
+        if unseen:
+            ids = np.array([tr.track_id for tr in unseen])
+            pts = objects.points.of_tracks(ids)
+            m = match_descriptors(objects.points.desc[pts], frame.keypoints.desc[kp], cfg.bf_max_distance,
+                                  cfg.bf_nn_ratio)
+            if len(m):
+                owner = objects.points.track[pts[m[:, 0]]]
+                votes_id, votes = np.unique(owner, return_counts=True)
+                b = int(np.argmax(votes))
+                if votes[b] >= cfg.min_join_matches and votes[b] >= cfg.join_ratio * len(m):
+                    tid = int(votes_id[b])
+                    sel = owner == tid
+                    tr = objects.tracks[tid]
+                    est = self.estimate_pose(frame, objects, tr, pred[tid], kp[m[sel, 1]], pts[m[sel, 0]], True)
+                    if est is not None:
+                        T_w_o, inl = est
+                        kp_in, pt_in = kp[m[sel, 1]][inl], pts[m[sel, 0]][inl]
+                        rest = ~np.isin(kp, kp_in)
+                        new = objects.add_points(tid, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
+                                                 frame.keypoints.desc[kp[rest]])
+                        self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box,
+                                      velocity=frame.timestamp - tr.last.timestamp <= cfg.max_velocity_gap_s)
+                        free[kp] = False
+                        return tid
+        # Instance-to-instance: box IoU with an object seen in the previous frame.
+        prev = [tr for tr in unseen if tr.last.frame_index == frame.index - 1 and tr.last.box2d is not None]
+        if prev:
+            iou = box_iou(np.array([box]), np.array([tr.last.box2d for tr in prev]))[0]
+            b = int(np.argmax(iou))
+            if iou[b] >= cfg.join_iou:
+                tr = prev[b]
+                T_w_o = pred[tr.track_id]
+                new = objects.add_points(tr.track_id, (X_w - T_w_o[:3, 3]) @ T_w_o[:3, :3], frame.keypoints.desc[kp])
+                self._observe(frame, objects, tr, T_w_o, kp, new, inst, box, velocity=False)
+                free[kp] = False
+                return tr.track_id
+        tr = objects.new_track(CLASS_NAMES[int(inst) // 1000])
+        centroid = X_w.mean(axis=0)
+        new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp])
+        self._observe(frame, objects, tr, make_pose(np.eye(3), centroid), kp, new, inst, box)
+        free[kp] = False
+        return tr.track_id
+
+    def _cull(self, objects: ObjectMap, track_ids: list[int]) -> None:
+        """Drop object points of the tracked objects that are rarely found where they project."""
+        P = objects.points
+        pts = P.of_tracks(np.array(track_ids, dtype=np.int64))
+        bad = (P.n_visible[pts] >= self.cfg.cull_min_visible) & (
+            P.n_found[pts] < self.cfg.cull_found_ratio * P.n_visible[pts])
+        P.alive[pts[bad]] = False
+
+    @staticmethod
+    def estimates(objects: ObjectMap, frame_index: int) -> list[ObjectEstimate]:
+        """Output of the objects observed at `frame_index` (world-frame velocities), by track id."""
+        out = []
+        for tid in sorted(objects.tracks):
+            tr = objects.tracks[tid]
+            obs = tr.at_frame(frame_index)
+            if obs is None:
+                continue
+            v_w, w_w = velocity_to_world(obs.T_w_o, obs.v_o, obs.w_o)
+            out.append(ObjectEstimate(track_id=tid, cls=tr.cls, T_w_o=obs.T_w_o.copy(), v_w=v_w, w_w=w_w,
+                                      n_points=obs.n_points, instance_id=obs.instance_id, box2d=obs.box2d))
+        return out
+
+    def _result(self, frame: Frame, objects: ObjectMap, seen: list[int], dyn: np.ndarray) -> ObjectFrameResult:
+        weak, n_matches = [], 0
+        for tid in sorted(seen):
+            tr = objects.tracks[tid]
+            obs = tr.last
+            n_matches += obs.n_points
+            n_features = int(np.count_nonzero(dyn & (frame.instance_id == obs.instance_id)))
+            if len(tr.observations) > 1 and n_features >= self.cfg.weak_min_features \
+                    and obs.n_points < self.cfg.weak_max_tracked:
+                weak.append(tid)
+        return ObjectFrameResult(self.estimates(objects, frame.index), n_matches, weak)
+
+    # --------------------------------------------------------------- keyframes
+    def on_keyframe(self, frame: Frame, kf_id: int, objects: ObjectMap, weak: list[int]) -> None:
+        """A keyframe was made from `frame`: its object observations join BA windows, and each weakly
+        tracked object gains new points from its instance's free close keypoints (III-D)."""
+        used = [o.kp_idx for tr in objects.tracks.values() if (o := tr.at_frame(frame.index)) is not None]
+        free = dynamic_keypoints(frame)
+        if used:
+            free[np.concatenate(used)] = False
+        for tr in objects.tracks.values():
+            obs = tr.at_frame(frame.index)
+            if obs is None:
+                continue
+            obs.kf_id = kf_id
+            if tr.track_id not in weak:
+                continue
+            kp = self._close(frame, np.flatnonzero(free & (frame.instance_id == obs.instance_id)))
+            if len(kp) == 0:
+                continue
+            T_o_w = inverse(obs.T_w_o)
+            X_o = self._world_points(frame, kp) @ T_o_w[:3, :3].T + T_o_w[:3, 3]
+            old = objects.points.X_o[obs.pt_ids]
+            ok = np.linalg.norm(X_o - np.median(old, axis=0), axis=1) <= self.cfg.max_point_spread_m
+            kp, X_o = kp[ok], X_o[ok]
+            new = objects.add_points(tr.track_id, X_o, frame.keypoints.desc[kp])
+            obs.kp_idx = np.r_[obs.kp_idx, kp]
+            obs.pt_ids = np.r_[obs.pt_ids, new]
+            free[kp] = False
