@@ -13,7 +13,7 @@ from dynaslam2.config import ObjectOptimConfig, OptimConfig
 from dynaslam2.errors import InputError
 from dynaslam2.geometry.se3 import inverse, se3_exp, se3_log, transform
 from dynaslam2.optim import BAProblem, local_bundle_adjustment
-from dynaslam2.optim.gtsam_utils import add_stereo_projection_factors
+from dynaslam2.optim.gtsam_utils import add_stereo_factors
 from dynaslam2.optim.object_ba import object_bundle_adjustment, temporal_tail
 from dynaslam2.optim.object_factors import direct_projection_factor, motion_factor, motion_residuals
 from dynaslam2.optim.object_pose import (
@@ -157,7 +157,7 @@ def test_direct_projection_factor_jacobians():
 
 @pytest.mark.parametrize("robust", [False, True])
 def test_q_parametrization_has_the_direct_objective(robust):
-    """Eq. (2) through Q = T_w_o^-1 T_w_c with gtsam's built-in projection factors has exactly the cost
+    """Eq. (2) through Q = T_w_o^-1 T_w_c with gtsam's built-in stereo/projection factors has exactly the cost
     of the direct (T_w_c, T_w_o, x_o) factor, with and without the Huber kernels."""
     T_w_c, T_w_o, X_o, obs = projection_case(3)
     n = len(X_o)
@@ -173,7 +173,7 @@ def test_q_parametrization_has_the_direct_objective(robust):
     direct = gtsam.NonlinearFactorGraph()
     direct.push_back(direct_projection_factor(0, 1, np.arange(2, 2 + n), obs.meas, obs.inv_sigma2, CAMERA, *deltas))
     builtin = gtsam.NonlinearFactorGraph()
-    add_stereo_projection_factors(builtin, np.ones(n, np.int64), np.arange(2, 2 + n), obs.meas, obs.inv_sigma2,
+    add_stereo_factors(builtin, np.ones(n, np.int64), np.arange(2, 2 + n), obs.meas, obs.inv_sigma2,
                                   CAMERA, *deltas)
     assert direct.error(direct_values) > 100.0  # the outliers weigh
     assert np.isclose(direct.error(direct_values), builtin.error(q_values), rtol=1e-9)
@@ -199,10 +199,12 @@ def test_q_and_direct_parametrizations_reach_the_same_optimum():
     print(f"Q parametrization {1e3 * (t1 - t0):.0f} ms CPU, direct {1e3 * (t2 - t1):.0f} ms CPU, "
           f"ratio {(t2 - t1) / (t1 - t0):.1f}")
     assert np.array_equal(q.obj_inlier, direct.obj_inlier) and np.array_equal(q.inlier, direct.inlier)
-    assert np.abs(q.T_c_w - direct.T_c_w).max() < 1e-6
-    assert np.abs(q.T_w_o - direct.T_w_o).max() < 1e-5
-    assert np.abs(q.X_o - direct.X_o).max() < 5e-4  # the depth of a point is its weakest direction
-    assert np.abs(np.hstack([q.v_o - direct.v_o, q.w_o - direct.w_o])).max() < 1e-5
+    assert np.abs(q.T_c_w - direct.T_c_w).max() < 1e-8
+    assert np.abs(q.T_w_o - direct.T_w_o).max() < 1e-8
+    # points whose observations are all outliers leave the problem after the robust stage (not converged)
+    kept = np.bincount(w.problem.oobs_pt[q.obj_inlier], minlength=len(q.X_o)) > 0
+    assert np.abs(q.X_o - direct.X_o)[kept].max() < 1e-6
+    assert np.abs(np.hstack([q.v_o - direct.v_o, q.w_o - direct.w_o])).max() < 1e-6
     assert q.final_error < 0.2 * q.initial_error
 
 

@@ -8,9 +8,10 @@ N' = 6 Nc + 6 Nc No + 3 No Nop (+ 6 per velocity), paper III-C.
 Object pose parametrization (`cfg.objects.parametrization`):
 - "camera_in_object" (default): the variable is the camera pose in the object frame Q = T_o_c =
   T_w_o^-1 T_w_c, so that eq. (2), u - pi(T_c_w T_w_o x_o) = u - pi(Q^-1 x_o), is gtsam's built-in
-  projection factor on (Q, x_o) built in C++ (`add_stereo_projection_factors`); T_w_o = T_w_c Q^-1
-  is recovered afterwards and eq. (4) sees it through (T_w_c, Q). A bijective change of variables
-  for given cameras: same objective, same optimum.
+  GenericStereoFactor3D (pinhole factor if monocular) on (Q, x_o) (`add_stereo_factors`, as the
+  static eq. (1) terms and local_ba); T_w_o = T_w_c Q^-1 is recovered afterwards and eq. (4) sees
+  it through (T_w_c, Q). A bijective change of variables for given cameras: same objective, same
+  optimum.
 - "direct": T_w_o is the variable and eq. (2) a Python factor per object observation on
   (T_w_c, T_w_o, x_o) (object_factors.direct_projection_factor): the reference formulation.
 
@@ -46,7 +47,7 @@ from dynaslam2.errors import InputError
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
 from dynaslam2.optim.gtsam_utils import (
-    add_stereo_projection_factors,
+    add_stereo_factors,
     allocate_keys,
     extract_points,
     extract_poses,
@@ -289,7 +290,7 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
         graph.addPriorPose3(key, values.atPose3(key), prior)
     # eq. (1)
     if problem.optimize_static:
-        add_stereo_projection_factors(graph, cam_key[problem.obs_kf[use]], spt_key[problem.obs_pt[use]],
+        add_stereo_factors(graph, cam_key[problem.obs_kf[use]], spt_key[problem.obs_pt[use]],
                                       problem.meas[use], problem.inv_sigma2[use], camera, delta_mono, delta_stereo)
     else:
         th = chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)
@@ -307,7 +308,7 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
                 int(cam_key[problem.obj_frames[f]]), int(obs_key[f]), opt_key[problem.oobs_pt[sel]],
                 problem.oobs_meas[sel], problem.oobs_inv_sigma2[sel], camera, delta_mono, delta_stereo))
     elif st.use.any():
-        add_stereo_projection_factors(graph, obs_key[problem.oobs_f[st.use]], opt_key[problem.oobs_pt[st.use]],
+        add_stereo_factors(graph, obs_key[problem.oobs_f[st.use]], opt_key[problem.oobs_pt[st.use]],
                                       problem.oobs_meas[st.use], problem.oobs_inv_sigma2[st.use], camera,
                                       delta_mono, delta_stereo)
     # gauge of each object frame

@@ -2,7 +2,7 @@
 
 One `gtsam.CustomFactor` per object per frame pair (eq. 4) or per object observation (eq. 2, direct
 form), stacking all the object's points with closed-form numpy Jacobians. Eq. (3) is gtsam's built-in
-`BetweenFactorVector` and the Q-parametrized eq. (2) the built-in projection factors (object_ba.py).
+`BetweenFactorVector` and the Q-parametrized eq. (2) the built-in stereo factors (object_ba.py).
 
 Conventions: `T_w_o` maps object points into the world (paper T_WO); the velocity variable of an
 object observation is the 6-vector (v_o, w_o) in the object frame at that time (object_pose.py,
@@ -43,15 +43,28 @@ def huber_scale(c2: np.ndarray, delta2: float | np.ndarray | None, linearize: bo
     return np.sqrt(2.0 * huber_cost(c2, delta2) / c2)
 
 
+_HAT_COLUMNS = np.array([1, 2, 3, 5, 6, 7])
+_HAT_SOURCE = np.array([2, 1, 2, 0, 1, 0])
+_HAT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+
+
+def _hat_rows(X: np.ndarray) -> np.ndarray:
+    """(3n, 3): the skew matrices [x_j]x of (n, 3) vectors stacked by rows (one indexed assignment)."""
+    K = np.zeros((len(X), 9))
+    K[:, _HAT_COLUMNS] = X[:, _HAT_SOURCE] * _HAT_SIGN
+    return K.reshape(-1, 3)
+
+
 def motion_residuals(
     T_w_o_a: np.ndarray, T_w_o_b: np.ndarray, velocity_a: np.ndarray, dt: float, X_o: np.ndarray,
     jacobians: bool = True,
 ) -> tuple[np.ndarray, ...]:
     """Eq. (4) for every point: e_j = (T_w_o^b - T_w_o^a dT(v_a, w_a, dt)) x_j, with dT of eq. (5).
 
-    Returns e (n, 3) and, with `jacobians`, its Jacobians: (n, 3, 6) on the right perturbations of
-    T_w_o^a and T_w_o^b (gtsam order (omega, nu)), (n, 3, 6) on velocity_a = (v, w), and (3, 3) on
-    each x_j (the same for every point).
+    Returns e (n, 3) and, with `jacobians`, its Jacobians stacked over the points, rows 3j..3j+2 for
+    point j: (3n, 6) on the right perturbations of T_w_o^a and of T_w_o^b (gtsam order (omega, nu)),
+    (3n, 6) on velocity_a = (v, w), and the (3, 3) Jacobian on each x_j (the same for every point).
+    Uses R [x]x = [R x]x R so that every block is one (3n, 3) @ (3, 3) product.
     """
     v, w = velocity_a[:3], velocity_a[3:]
     R_a, t_a, R_b, t_b = T_w_o_a[:3, :3], T_w_o_a[:3, 3], T_w_o_b[:3, :3], T_w_o_b[:3, 3]
@@ -62,18 +75,18 @@ def motion_residuals(
     if not jacobians:
         return (e,)
     n = len(X_o)
-    X_hat = hat(X_o)
-    J_a = np.empty((n, 3, 6))
-    J_a[:, :, :3] = R_a @ hat(X_o @ R_d.T + v * dt)  # -R_a [-[y]x, I] with y = dT x
-    J_a[:, :, 3:] = -R_a
-    J_b = np.empty((n, 3, 6))
-    J_b[:, :, :3] = -R_b @ X_hat
-    J_b[:, :, 3:] = R_b
-    J_vel = np.empty((n, 3, 6))
-    J_vel[:, :, :3] = -R_a * dt
+    X_ad = X_o @ R_ad.T
+    J = np.empty((3, n, 3, 6))  # J_a, J_b, J_vel
+    J[0, :, :, :3] = (_hat_rows(X_ad + R_a @ (v * dt)) @ R_a).reshape(n, 3, 3)  # -R_a [-[y]x, I], y = dT x
+    J[0, :, :, 3:] = -R_a
+    J[1, :, :, :3] = (_hat_rows(X_o @ R_b.T) @ -R_b).reshape(n, 3, 3)  # R_b [-[x]x, I]
+    J[1, :, :, 3:] = R_b
+    J[2, :, :, :3] = -R_a * dt
     # d Exp(w dt) x / dw = -R_d [x]x J_r(w dt) dt (gtsam's ExpmapDerivative is the right Jacobian)
-    J_vel[:, :, 3:] = R_ad @ X_hat @ (np.asarray(gtsam.Rot3.ExpmapDerivative(w * dt)) * dt)
-    return e, J_a, J_b, J_vel, J_x
+    J_r = np.asarray(gtsam.Rot3.ExpmapDerivative(w * dt)) * dt
+    J[2, :, :, 3:] = (_hat_rows(X_ad) @ (R_ad @ J_r)).reshape(n, 3, 3)
+    J = J.reshape(3, 3 * n, 6)
+    return e, J[0], J[1], J[2], J_x
 
 
 def _compose_inverse(T_w_c: np.ndarray, Q: np.ndarray) -> np.ndarray:
@@ -122,18 +135,18 @@ def motion_factor(
         s = huber_scale(np.einsum("ij,ij->i", e, e), huber_delta2, H is not None)[:, None]
         if H is not None:
             J_a, J_b, J_vel, J_x = out[1:]
-            w = s[:, :, None] / sigma
-            J_a, J_b = (w * J_a).reshape(-1, 6), (w * J_b).reshape(-1, 6)
+            w = np.repeat(s[:, 0] / sigma, 3)[:, None]  # per row
+            J_a, J_b = w * J_a, w * J_b
             if via_camera:
                 # T_w_c Exp(xi) Q^-1 = T_w_o Exp(Ad_Q xi) and T_w_c (Q Exp(xi))^-1 = T_w_o Exp(-Ad_Q xi)
-                H[0], H[2] = J_a @ adjoint(Q_a), -J_a @ adjoint(Q_a)
-                H[1], H[3] = J_b @ adjoint(Q_b), -J_b @ adjoint(Q_b)
+                J_a, J_b = J_a @ adjoint(Q_a), J_b @ adjoint(Q_b)
+                H[0], H[1], H[2], H[3] = J_a, J_b, -J_a, -J_b
             else:
                 H[0], H[1] = J_a, J_b
-            H[n_pose] = (w * J_vel).reshape(-1, 6)
+            H[n_pose] = w * J_vel
             if point_keys is not None:
                 J_pts = np.zeros((n, 3, n, 3))
-                J_pts[np.arange(n), :, np.arange(n), :] = w * J_x
+                J_pts[np.arange(n), :, np.arange(n), :] = w.reshape(n, 3, 1) * J_x
                 H[n_pose + 1:] = gtsam.JacobianVector(list(J_pts.reshape(3 * n, n, 3).transpose(1, 0, 2)))
         return (e * s).ravel()
 
@@ -153,25 +166,23 @@ def direct_projection_factor(
     """Eq. (2) on (T_w_c, T_w_o, x_o) for the points of one object seen by one camera: u - pi(T_c_w T_w_o x_o).
 
     The reference formulation that the Q = T_o_c parametrization replaces, with the same objective as
-    `add_stereo_projection_factors`: a monocular observation is a (u, v) block with sigma s; a stereo
-    one a left (u, v) and a right (u_R, v) block, each with sigmas (s, s sqrt 2) so that v counts
-    once; each block Huber-weighted on its own (delta of the observation's dof: mono or stereo). A
-    point behind the camera gives gtsam's constant error 2 fx with zero Jacobian.
+    `add_stereo_factors` (GenericStereoFactor3D / pinhole projection factors): residual (u, v, u_R)
+    of a stereo observation, (u, v) of a monocular one, sigma s, Huber on each observation's residual
+    (delta of its dof). A point behind the camera gives gtsam's constant error 2 fx, zero Jacobian.
     """
     n = len(point_keys)
     stereo = meas[:, 2] >= 0
-    sigma = 1.0 / np.sqrt(inv_sigma2)
-    sigma_v = np.where(stereo, sigma * np.sqrt(2.0), sigma)
-    sigmas = np.column_stack([sigma, sigma_v, sigma, sigma_v])  # of the rows (u, v, u_R, v)
-    delta_left = np.where(stereo, huber_delta_stereo or 0.0, huber_delta_mono or 0.0)
-    robust = huber_delta_stereo is not None and huber_delta_mono is not None
-    rows = np.flatnonzero(np.column_stack([np.ones((n, 2), bool), stereo, stereo]).ravel())
+    sqrt_info = np.sqrt(inv_sigma2)
+    delta2 = None
+    if huber_delta_stereo is not None and huber_delta_mono is not None:
+        delta2 = np.where(stereo, huber_delta_stereo**2, huber_delta_mono**2)
+    rows = np.flatnonzero(np.column_stack([np.ones((n, 2), bool), stereo]).ravel())
     fx, fy, cx, cy, bf = camera.fx, camera.fy, camera.cx, camera.cy, camera.bf
     keys = [camera_key, object_key] + [int(k) for k in point_keys]
 
     def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
-        T_w_c = np.asarray(values.atPose3(camera_key).matrix())
-        T_w_o = np.asarray(values.atPose3(object_key).matrix())
+        T_w_c = values.atPose3(camera_key).matrix()
+        T_w_o = values.atPose3(object_key).matrix()
         X = np.array([values.atPoint3(int(k)) for k in point_keys])
         R_c_o = T_w_c[:3, :3].T @ T_w_o[:3, :3]
         X_c = X @ R_c_o.T + T_w_c[:3, :3].T @ (T_w_o[:3, 3] - T_w_c[:3, 3])
@@ -179,31 +190,27 @@ def direct_projection_factor(
         front = z > 0
         inv_z = 1.0 / np.where(front, z, 1.0)
         u = fx * x * inv_z + cx
-        pred = np.stack([u, fy * y * inv_z + cy, u - bf * inv_z, fy * y * inv_z + cy], -1)
-        r = np.where(front[:, None], pred - meas[:, [0, 1, 2, 1]], 2.0 * fx)  # (u, v, u_R, v)
-        r /= sigmas
-        s = np.ones((n, 2))
-        if robust:
-            s[:, 0] = huber_scale(r[:, 0]**2 + r[:, 1]**2, delta_left**2, H is not None)
-            s[:, 1] = huber_scale(r[:, 2]**2 + r[:, 3]**2, huber_delta_stereo**2, H is not None)
-        scale = np.repeat(s, 2, axis=1)
+        pred = np.stack([u, fy * y * inv_z + cy, u - bf * inv_z], -1)
+        r = np.where(front[:, None], pred - meas, 2.0 * fx) * sqrt_info[:, None]
+        r[~stereo, 2] = 0.0
+        scale = huber_scale(np.einsum("ij,ij->i", r, r), delta2, H is not None)
         if H is not None:
-            # d(u, v, u_R, v) / d X_c, whitened and weighted, zero behind the camera
-            D = np.zeros((n, 4, 3))
+            # d(u, v, u_R) / d X_c, whitened and weighted, zero behind the camera
+            D = np.zeros((n, 3, 3))
             D[:, 0, 0] = D[:, 2, 0] = fx * inv_z
             D[:, 0, 2] = -fx * x * inv_z**2
             D[:, 2, 2] = -(fx * x - bf) * inv_z**2
-            D[:, 1, 1] = D[:, 3, 1] = fy * inv_z
-            D[:, 1, 2] = D[:, 3, 2] = -fy * y * inv_z**2
-            D *= (scale * front[:, None] / sigmas)[:, :, None]
+            D[:, 1, 1] = fy * inv_z
+            D[:, 1, 2] = -fy * y * inv_z**2
+            D *= (scale * sqrt_info * front)[:, None, None]
             J_cam = np.concatenate([D @ hat(X_c), -D], -1)  # X_c' = X_c + [X_c]x omega - nu
             D_o = D @ R_c_o
             J_obj = np.concatenate([-D_o @ hat(X), D_o], -1)  # X_c' = X_c + R_c_o (omega x x + nu)
             H[0] = J_cam.reshape(-1, 6)[rows]
             H[1] = J_obj.reshape(-1, 6)[rows]
-            J_pts = np.zeros((n, 4, n, 3))
+            J_pts = np.zeros((n, 3, n, 3))
             J_pts[np.arange(n), :, np.arange(n), :] = D_o
-            H[2:] = gtsam.JacobianVector(list(J_pts.reshape(4 * n, n, 3)[rows].transpose(1, 0, 2)))
-        return (r * scale).ravel()[rows]
+            H[2:] = gtsam.JacobianVector(list(J_pts.reshape(3 * n, n, 3)[rows].transpose(1, 0, 2)))
+        return (r * scale[:, None]).ravel()[rows]
 
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(len(rows)), keys, error)
