@@ -337,3 +337,26 @@ def test_bad_input():
         object_bundle_adjustment(dataclasses.replace(p, obj_frames=np.zeros_like(p.obj_frames)), CAMERA, OptimConfig())
     with pytest.raises(InputError, match="T_w_o"):
         object_bundle_adjustment(dataclasses.replace(p, T_w_o=p.T_w_o[:-1]), CAMERA, OptimConfig())
+
+
+def test_an_observation_with_too_few_points_follows_the_motion_model():
+    """An object observation left with fewer than min_observation_points measurements has no
+    reprojection term: its pose comes from its neighbours through eq. (3)-(5), not its initial value."""
+    w = window(16, n_static=600, n_object_points=40, static_depth=(4.0, 25.0), noise_scale=0.5)
+    p = w.problem
+    f = int(np.flatnonzero((p.obj_id == 0) & (p.obj_frames == 4))[0])
+    keep = np.flatnonzero(p.oobs_f != f)
+    keep = np.sort(np.concatenate([keep, np.flatnonzero(p.oobs_f == f)[:2]]))  # 2 < 5 measurements left
+    problem = dataclasses.replace(p, oobs_f=p.oobs_f[keep], oobs_pt=p.oobs_pt[keep], oobs_meas=p.oobs_meas[keep],
+                                  oobs_inv_sigma2=p.oobs_inv_sigma2[keep])
+    result = object_bundle_adjustment(problem, CAMERA, OptimConfig())
+    dt0, _ = pose_errors(p.T_w_o[f], w.T_w_o_true[f])
+    dt, dr = pose_errors(result.T_w_o[f], w.T_w_o_true[f])
+    assert dt0 > 0.05 and dt < 0.05 and dr < 0.5
+
+
+def test_same_input_same_output():
+    w = window(17, n_static=200, n_object_points=20)
+    a = object_bundle_adjustment(w.problem, CAMERA, OptimConfig())
+    b = object_bundle_adjustment(w.problem, CAMERA, OptimConfig())
+    assert np.array_equal(a.T_w_o, b.T_w_o) and np.array_equal(a.T_c_w, b.T_c_w) and np.array_equal(a.X_o, b.X_o)
