@@ -274,7 +274,7 @@ class ObjectsConfig:
 
     # Creation: an unclaimed dynamic-class instance with this many keypoints with stereo depth
     # closer than max_point_depth_m ("new nearby keypoints") creates an object.
-    min_new_points: int = 15
+    min_new_points: int = 10
     max_point_depth_m: float = 40.0
     # New object points farther than this from the median of the instance's points are dropped
     # (keypoints on the mask border that see the background).
@@ -283,7 +283,7 @@ class ObjectsConfig:
     # the keypoint level), descriptor ratio; fewer matches than min_projection_matches -> (b).
     projection_radius: float = 12.0
     projection_nn_ratio: float = 0.9
-    min_projection_matches: int = 12
+    min_projection_matches: int = 8
     # (b) brute-force matching against the most overlapping instance (2D box IoU >= min_overlap_iou
     # with the object's last box): Hamming threshold and ratio test.
     min_overlap_iou: float = 0.1
@@ -291,7 +291,7 @@ class ObjectsConfig:
     bf_nn_ratio: float = 0.8
     # Pose-only optimization: an object observation needs this many inliers; a pose implying a
     # speed above max_speed_mps since the last observation is rejected.
-    min_inliers: int = 8
+    min_inliers: int = 6
     max_speed_mps: float = 40.0
     # Robust initialization from 3D-3D matches (stereo depth) when no velocity is known: RANSAC
     # hypotheses and inlier distance.
@@ -301,7 +301,7 @@ class ObjectsConfig:
     # points of one map object joins its track; else an instance whose box has IoU >= join_iou with
     # an object seen in the previous frame joins that track (instance-to-instance association).
     join_ratio: float = 0.5
-    min_join_matches: int = 8
+    min_join_matches: int = 6
     join_iou: float = 0.3
     # Tracks unseen for longer than this are no longer matched (occlusions up to it keep the id).
     max_lost_s: float = 2.0
@@ -317,6 +317,13 @@ class ObjectsConfig:
     cull_found_ratio: float = 0.25
     # Bundle adjustment with objects on keyframes (III-D); False: object poses from tracking only.
     ba: bool = True
+    # Not in the paper: a constant-velocity Kalman filter of each object-frame origin between BAs
+    # (white acceleration accel_sigma m/s^2; pose-only position covariance from its stereo Jacobian,
+    # 1 px at level 0, plus position_floor_m; unknown initial speed initial_speed_sigma m/s).
+    filter: bool = True
+    accel_sigma: float = 3.0
+    position_floor_m: float = 0.05
+    initial_speed_sigma: float = 10.0
 
     def validate(self) -> None:
         for name in ("min_new_points", "min_projection_matches", "min_inliers", "min_join_matches",
@@ -326,7 +333,8 @@ class ObjectsConfig:
         if self.min_inliers < 3:
             raise ConfigError(f"objects.min_inliers: expected >= 3, got {self.min_inliers}")
         for name in ("max_point_depth_m", "max_point_spread_m", "projection_radius", "max_speed_mps",
-                     "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s"):
+                     "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s", "accel_sigma", "position_floor_m",
+                     "initial_speed_sigma"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",

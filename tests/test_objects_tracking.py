@@ -71,7 +71,7 @@ def test_constant_velocity_prediction_follows_eq5():
     T_true = [T0]
     for _ in range(3):
         T_true.append(T_true[-1] @ dT)
-    objects, trk = ObjectMap(), tracker()
+    objects, trk = ObjectMap(), tracker("objects.filter=false")
     for i in range(3):
         trk.track(make_frame(i, [(car, T_true[i])]), None, objects)
     (tr,) = objects.tracks.values()
@@ -86,6 +86,22 @@ def test_constant_velocity_prediction_follows_eq5():
     np.testing.assert_allclose(trk.predicted_pose(tr, 3 * DT), tr.last.T_w_o)
 
 
+def test_position_filter_converges_to_the_constant_velocity_motion():
+    """With the tracking filter on, the filtered origin and velocity reach the true motion within a
+    few frames of exact observations (the filter starts with an unknown velocity)."""
+    rng = np.random.default_rng(3)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    v_w = np.array([5.0, 0.0, -3.0])
+    T_true = [make_pose(np.eye(3), np.array([-3.0, 0.5, 18.0]) + v_w * DT * i) for i in range(12)]
+    objects, trk = ObjectMap(), tracker("objects.filter=true")
+    for i in range(12):
+        result = trk.track(make_frame(i, [(car, T_true[i])]), None, objects)
+    (e,) = result.estimates
+    T_off = inverse(T_true[0]) @ objects.tracks[e.track_id].observations[0].T_w_o
+    assert np.linalg.norm(e.T_w_o[:3, 3] - (T_true[11] @ T_off)[:3, 3]) < 0.02
+    assert np.linalg.norm(e.v_w - v_w) < 0.2
+
+
 def test_occluded_object_keeps_its_track_id():
     """A car hidden for 0.5 s that re-appears under another instance id, off its constant-velocity
     prediction, is matched against the map object (not the previous frame) and keeps its id; a
@@ -93,7 +109,7 @@ def test_occluded_object_keeps_its_track_id():
     rng = np.random.default_rng(1)
     car = Body(rng, 1001, 90, (4.0, 1.5, 1.5))
     ped = Body(rng, 2002, 40, (0.6, 1.7, 0.5))
-    objects, trk = ObjectMap(), tracker()
+    objects, trk = ObjectMap(), tracker("objects.filter=false")  # exact pose-only poses
     T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.6 * i, 0.8, 15.0])) for i in range(14)]
     T_car[10:] = [T @ make_pose(np.eye(3), np.array([1.5, 0.0, 0.0])) for T in T_car[10:]]  # sped up while hidden
     T_ped = [make_pose(np.eye(3), np.array([3.0, 0.5, 9.0 - 0.1 * i])) for i in range(14)]

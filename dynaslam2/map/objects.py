@@ -96,13 +96,16 @@ class ObjectTrack:
     """One tracked object: id, class and its observations in time order (one per frame seen).
 
     `velocity_known`: v_o/w_o of the last observation come from two close observations, so the
-    constant-velocity prediction (eq. 5) applies.
+    constant-velocity prediction (eq. 5) applies. `state_mean` (6,) / `state_cov` (6, 6): constant-
+    velocity filter of the object-frame origin (world position, world velocity) at the last observation.
     """
 
     track_id: int
     cls: str
     observations: list[ObjectObservation] = field(default_factory=list)
     velocity_known: bool = False
+    state_mean: np.ndarray | None = None
+    state_cov: np.ndarray | None = None
 
     @property
     def last(self) -> ObjectObservation:

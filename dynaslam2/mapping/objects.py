@@ -107,9 +107,11 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     for i, k in enumerate(free_ids):
         map_.keyframes[k].T_c_w = rigid(result.T_c_w[i])
     P.X_o[obj_pts] = result.X_o
-    for f, (_, o) in enumerate(obs_list):
+    for f, (k, o) in enumerate(obs_list):
         o.T_w_o = rigid(result.T_w_o[f])
         o.v_o, o.w_o = result.v_o[f].copy(), result.w_o[f].copy()
+        if o is tracks[k].last and tracks[k].state_mean is not None:  # the tracking filter restarts from BA
+            tracks[k].state_mean[:3] = o.T_w_o[:3, 3]
         good = result.obj_inlier[oobs_f == f]
         o.kp_idx, o.pt_ids = o.kp_idx[good], o.pt_ids[good]
     if camera_weak:

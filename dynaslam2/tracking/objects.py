@@ -275,19 +275,27 @@ class ObjectTracker:
         return kp[m[:, 1]], pts[m[:, 0]]
 
     def _observe(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o: np.ndarray, kp: np.ndarray,
-                 pts: np.ndarray, instance_id: int, box: np.ndarray, velocity: bool = True) -> None:
+                 pts: np.ndarray, instance_id: int, box: np.ndarray, measured: bool = True) -> None:
         """Record the observation of `track` at `frame`, its velocity from the last observation
-        (inverse of eq. 5) when the two are close in time, and refresh the matched points."""
+        (inverse of eq. 5) when the two are close in time, and refresh the matched points.
+        `measured=False`: `T_w_o` is a prediction (velocities carried over)."""
         last = track.observations[-1] if track.observations else None
         v_o, w_o = np.zeros(3), np.zeros(3)
         known = False
         if last is not None:
             dt = frame.timestamp - last.timestamp
-            if velocity and 0 < dt <= self.cfg.max_velocity_gap_s:
+            if measured and 0 < dt <= self.cfg.max_velocity_gap_s:
                 v_o, w_o = object_velocity(last.T_w_o, T_w_o, dt)
                 known = True
-            elif not velocity:
+            elif not measured:
                 v_o, w_o, known = last.v_o.copy(), last.w_o.copy(), track.velocity_known
+        if self.cfg.filter:
+            info = self._position_information(frame, objects, T_w_o, kp, pts) if measured else None
+            dt = frame.timestamp - last.timestamp if last is not None else 0.0
+            p_w, v_w = self._filter(track, dt, T_w_o[:3, 3], info)
+            T_w_o = T_w_o.copy()
+            T_w_o[:3, 3] = p_w
+            v_o = T_w_o[:3, :3].T @ v_w
         box2d = None if not np.all(np.isfinite(box)) else tuple(float(b) for b in box)
         track.observations.append(ObjectObservation(
             frame_index=frame.index, timestamp=frame.timestamp, T_w_o=T_w_o, v_o=v_o, w_o=w_o,
@@ -297,18 +305,62 @@ class ObjectTracker:
         P.desc[pts] = frame.keypoints.desc[kp]
         P.n_found[pts] += 1
 
+    def _position_information(self, frame: Frame, objects: ObjectMap, T_w_o: np.ndarray, kp: np.ndarray,
+                              pts: np.ndarray) -> np.ndarray:
+        """(3, 3) information of the object-frame origin (world) from the stereo observations of its
+        points: sum of J^T J / sigma^2 with J = d(u, v, u_right)/d(translation) at each point."""
+        T_c_o = frame.T_c_w @ T_w_o
+        X_c = objects.points.X_o[pts] @ T_c_o[:3, :3].T + T_c_o[:3, 3]
+        x, y, z = X_c[:, 0], X_c[:, 1], np.maximum(X_c[:, 2], 1e-3)
+        cam = self.camera
+        J = np.zeros((len(kp), 3, 3))
+        J[:, 0, 0] = J[:, 2, 0] = cam.fx / z
+        J[:, 0, 2] = -cam.fx * x / z**2
+        J[:, 1, 1] = cam.fy / z
+        J[:, 1, 2] = -cam.fy * y / z**2
+        J[:, 2, 2] = -(cam.fx * x - cam.bf) / z**2
+        J[frame.u_right[kp] < 0, 2, :] = 0.0
+        info_c = np.einsum("n,nki,nkj->ij", self.inv_level_sigma2[frame.keypoints.octave[kp]], J, J)
+        R_w_c = frame.T_w_c[:3, :3]
+        return R_w_c @ info_c @ R_w_c.T
+
+    def _filter(self, track: ObjectTrack, dt: float, p_meas: np.ndarray,
+                info: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Constant-velocity Kalman filter of the object-frame origin (white acceleration of sigma
+        `accel_sigma`): predict over `dt`, update with the pose-only position of information `info`
+        (None: prediction only). Returns the filtered (position, world velocity)."""
+        cfg = self.cfg
+        I3 = np.eye(3)
+        if info is not None:
+            R = np.linalg.inv(info + 1e-9 * I3) + cfg.position_floor_m**2 * I3
+        if track.state_mean is None:
+            track.state_mean = np.r_[p_meas, np.zeros(3)]
+            R0 = R if info is not None else cfg.position_floor_m**2 * I3
+            track.state_cov = np.block([[R0, np.zeros((3, 3))], [np.zeros((3, 3)), cfg.initial_speed_sigma**2 * I3]])
+            return track.state_mean[:3].copy(), track.state_mean[3:].copy()
+        F = np.eye(6)
+        F[:3, 3:] = dt * I3
+        Q = cfg.accel_sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), I3)
+        m = F @ track.state_mean
+        P = F @ track.state_cov @ F.T + Q
+        if info is not None:
+            K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R)
+            m = m + K @ (p_meas - m[:3])
+            P = P - K @ P[:3, :]
+        track.state_mean, track.state_cov = m, 0.5 * (P + P.T)
+        return m[:3].copy(), m[3:].copy()
+
     def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                     inst: int, box: np.ndarray, boxes: np.ndarray, free: np.ndarray) -> int | None:
         """An unclaimed instance: joins an unseen track (point votes, then box IoU with the previous
-        frame) or creates an object at the centroid of its points with identity rotation (III-B)."""
+        frame; >= min_inliers close keypoints) or, with >= min_new_points close keypoints, creates an
+        object at the centroid of its points with identity rotation (III-B)."""
         cfg = self.cfg
         kp = self._close(frame, np.flatnonzero(free & (frame.instance_id == inst)))
-        if len(kp) < cfg.min_new_points:
-            return None
         X_w = self._world_points(frame, kp)
         ok = self._compact(X_w)
         kp, X_w = kp[ok], X_w[ok]
-        if len(kp) < cfg.min_new_points:
+        if len(kp) < cfg.min_inliers:
             return None
         # Track ids from point votes: most matched keypoints belong to one map object.
         if unseen:
@@ -331,8 +383,7 @@ class ObjectTracker:
                         rest = ~np.isin(kp, kp_in)
                         new = objects.add_points(tid, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
                                                  frame.keypoints.desc[kp[rest]])
-                        self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box,
-                                      velocity=frame.timestamp - tr.last.timestamp <= cfg.max_velocity_gap_s)
+                        self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box)
                         free[kp] = False
                         return tid
         # Instance-to-instance: box IoU with an object seen in the previous frame.
@@ -344,9 +395,11 @@ class ObjectTracker:
                 tr = prev[b]
                 T_w_o = pred[tr.track_id]
                 new = objects.add_points(tr.track_id, (X_w - T_w_o[:3, 3]) @ T_w_o[:3, :3], frame.keypoints.desc[kp])
-                self._observe(frame, objects, tr, T_w_o, kp, new, inst, box, velocity=False)
+                self._observe(frame, objects, tr, T_w_o, kp, new, inst, box, measured=False)
                 free[kp] = False
                 return tr.track_id
+        if len(kp) < cfg.min_new_points:
+            return None
         tr = objects.new_track(CLASS_NAMES[int(inst) // 1000])
         centroid = X_w.mean(axis=0)
         new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp])

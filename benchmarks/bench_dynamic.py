@@ -1,0 +1,106 @@
+"""The three modes side by side on simulated sequences (issue 4's proof): ego ATE of `static`,
+`masked` and `dynamic`, the objects within 30 m (object ATE, TP ratio, id switches) of `dynamic`,
+end-to-end fps and median local BA per keyframe of each mode.
+
+    python benchmarks/bench_dynamic.py [--scenarios traffic crossing following static] [--seeds 0 1]
+        [--frames 150] [--size 640x480] [--modes static masked dynamic] [--work DIR] [--set k=v ...]
+
+Sequences are generated once into --work (default /tmp/bench_dynamic) and reused. For each sequence
+the modes run one after the other on frames loaded beforehand (disk reads are not SLAM time); fps =
+frames / summed per-frame `total` (tracking + objects + local mapping + BA, one process). Timings on
+a shared machine move with its load: compare modes within one sequence.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+import numpy as np
+
+from dynaslam2.config import load_config
+from dynaslam2.eval.objects import evaluate_objects
+from dynaslam2.eval.trajectory import ate
+from dynaslam2.io.sequence import open_sequence
+from dynaslam2.system import System
+
+
+def ensure_sequence(work: Path, scenario: str, seed: int, frames: int, size: str) -> Path:
+    out = work / f"{scenario}_s{seed}_{frames}_{size}"
+    if not (out / "meta.json").exists():
+        os.environ.setdefault("MUJOCO_GL", "egl")
+        from sim.generate import generate_sequence
+        from sim.scenarios import load_scenario
+
+        cfg = load_scenario(scenario, [f"seed={seed}", f"frames={frames}", f"image_size={size}"])
+        generate_sequence(cfg, out, overwrite=True, preview=False, progress=False)
+    return out
+
+
+def run_mode(seq, data: list, mode: str, overrides: list[str]) -> dict:
+    system = System(load_config(None, overrides + [f"mode={mode}"]), seq.camera)
+    estimates = [system.process(frame) for frame in data]
+    T = np.array([e.T_w_c for e in estimates])
+    ba = [e.mapping_ms.get("ba", 0.0) for e in estimates if e.keyframe and e.mapping_ms]
+    out = {
+        "ate": ate(T, seq.gt_T_w_c[: len(data)])["rmse_m"],
+        "fps": len(data) / (sum(e.timing_ms["total"] for e in estimates) / 1e3),
+        "ba_ms": float(np.median(ba)) if ba else 0.0,
+        "lost": sum(e.state == "lost" for e in estimates),
+        "objects_ms": float(np.median([e.timing_ms["objects"] for e in estimates])),
+    }
+    if mode == "dynamic":
+        m = evaluate_objects(seq, [e.objects for e in estimates], T) if len(data) == len(seq) else None
+        if m is not None:
+            out.update(obj_ate=m["ate_rmse_m"], obj_ate_cam=m["ate_cam_rmse_m"], tp=m["tp_ratio"],
+                       id_sw=m["id_switches"], reid_sw=m["reid_switches"], gt_tracks=m["gt_tracks"])
+    return out
+
+
+def fmt(v, spec: str = ".3f") -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenarios", nargs="+", default=["traffic", "crossing", "following", "static"])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    ap.add_argument("--frames", type=int, default=150)
+    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--modes", nargs="+", default=["static", "masked", "dynamic"])
+    ap.add_argument("--work", type=Path, default=Path("/tmp/bench_dynamic"))
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    args = ap.parse_args()
+    args.work.mkdir(parents=True, exist_ok=True)
+    modes = args.modes
+    head = (["scenario", "seed"] + [f"ATE {m[:3]}" for m in modes] + ["obj ATE", "obj ATEcam", "TP", "idsw", "reid"]
+            + [f"fps {m[:3]}" for m in modes] + [f"BA ms {m[:3]}" for m in modes] + ["obj ms"])
+    print("  ".join(f"{h:>10}" for h in head), flush=True)
+    rows = []
+    for scenario in args.scenarios:
+        for seed in args.seeds:
+            seq_path = ensure_sequence(args.work, scenario, seed, args.frames, args.size)
+            seq = open_sequence(seq_path)
+            data = [seq[i] for i in range(len(seq))]
+            r = {m: run_mode(seq, data, m, args.overrides) for m in modes}
+            rows.append((scenario, seed, r))
+            d = r.get("dynamic", {})
+            cells = ([scenario, str(seed)] + [fmt(r[m]["ate"]) for m in modes]
+                     + [fmt(d.get("obj_ate")), fmt(d.get("obj_ate_cam")), fmt(d.get("tp"), ".2f"),
+                        fmt(d.get("id_sw"), "d"), fmt(d.get("reid_sw"), "d")]
+                     + [fmt(r[m]["fps"], ".2f") for m in modes] + [fmt(r[m]["ba_ms"], ".0f") for m in modes]
+                     + [fmt(d.get("objects_ms"), ".1f")])
+            print("  ".join(f"{c:>10}" for c in cells), flush=True)
+    if {"masked", "dynamic"} <= set(modes):
+        better = sum(r["dynamic"]["ate"] <= r["masked"]["ate"] for _, _, r in rows)
+        print(f"dynamic ego ATE <= masked on {better}/{len(rows)} sequences")
+    if {"static", "dynamic"} <= set(modes):
+        ratio = [r["dynamic"]["ate"] / r["static"]["ate"] for _, _, r in rows]
+        print("dynamic/static ego ATE: " + ", ".join(f"{s}{k}: {x:.2f}" for (s, k, _), x in zip(rows, ratio)))
+        fps = [r["dynamic"]["fps"] / r["static"]["fps"] for _, _, r in rows]
+        print(f"dynamic/static fps: median {np.median(fps):.2f}")
+
+
+if __name__ == "__main__":
+    main()
