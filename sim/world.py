@@ -384,13 +384,25 @@ def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
                          b.material(tex.vehicle_paint(rng, 128, rich=b.rich)))
 
 
+# Bottom of the bumpers/aprons at both ends of each vehicle class (m above the road): the box's bottom
+# corners at the ends then carry geometry, so the projected 3D box is tight on the mask in the image.
+_APRON_Z = {"car": 0.06, "van": 0.07, "truck": 0.10}
+_APRON_LEN = {"car": 0.22, "van": 0.25, "truck": 0.3}  # m, shorter than the overhang ahead of the wheels
+
+
 def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) -> None:
-    """Boxes and wheels that fill the (L, W, H) box centred on the body origin exactly."""
+    """Boxes and wheels that fill the (L, W, H) box centred on the body origin exactly.
+
+    Full-width aprons (bumpers, a truck's underrun guard) reach down to `_APRON_Z` at both ends and the
+    highest part spans the full length/width where it meets the box's top corners seen by the camera,
+    so that the 3D box is tight in the image, not only in 3D.
+    """
     L, W, H = pa.dims
     size = b.px
     paint = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.4, shininess=0.6)
     glass = b.material(tex.glass(rng, 128, rich=b.rich), specular=0.6, shininess=0.8)
     tyre = b.material(None, rgba=(0.08, 0.08, 0.08, 1), specular=0.05)
+    trim = b.material(None, rgba=(0.16, 0.16, 0.17, 1), specular=0.2)
     z0 = -H / 2  # ground in body coordinates
     r = {"car": 0.32, "van": 0.36, "truck": 0.5}[pa.cls]
     if pa.cls == "car":
@@ -398,6 +410,7 @@ def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) 
         b.box(body, (0, 0, z0 + (sill + belt) / 2), (L / 2, W / 2, (belt - sill) / 2), paint)
         cab_l = 0.5 * L
         b.box(body, (-0.05 * L, 0, z0 + (belt + H) / 2), (cab_l / 2, 0.45 * W, (H - belt) / 2), glass)
+        front_top = rear_top = sill
     elif pa.cls == "van":
         sill = 0.3
         hood_l = 0.18 * L
@@ -405,14 +418,20 @@ def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) 
         b.box(body, (L / 2 - hood_l / 2, 0, z0 + (sill + 0.5 * H) / 2), (hood_l / 2, W / 2, (0.5 * H - sill) / 2),
               paint)
         b.box(body, (L / 2 - hood_l - 0.02, 0, z0 + 0.72 * H), (0.03, 0.42 * W, 0.14 * H), glass)
-    else:  # truck: chassis, cab, cargo box
+        front_top = rear_top = sill
+    else:  # truck: chassis, full-height cab (roof fairing up to the cargo box), cargo box
         cab_l = 0.24 * L
-        b.box(body, (0, 0, z0 + 0.75), (L / 2, 0.45 * W, 0.25), tyre)
-        b.box(body, (L / 2 - cab_l / 2, 0, z0 + (0.6 + 0.8 * H) / 2), (cab_l / 2, 0.48 * W, (0.8 * H - 0.6) / 2),
+        b.box(body, (0, 0, z0 + 0.75), (L / 2 - _APRON_LEN["truck"], 0.45 * W, 0.25), tyre)  # between the aprons
+        b.box(body, (L / 2 - cab_l / 2, 0, z0 + (0.6 + 0.8 * H) / 2), (cab_l / 2, W / 2, (0.8 * H - 0.6) / 2),
               paint)
+        b.box(body, (L / 2 - cab_l / 2 - 0.05, 0, z0 + 0.9 * H), (cab_l / 2 - 0.05, 0.47 * W, 0.1 * H), paint)  # fairing
         b.box(body, (L / 2 - 0.02, 0, z0 + 0.65 * H), (0.02, 0.4 * W, 0.1 * H), glass)
         cargo = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.2)
         b.box(body, (-(cab_l + 0.1) / 2, 0, z0 + (1.0 + H) / 2), ((L - cab_l - 0.1) / 2, W / 2, (H - 1.0) / 2), cargo)
+        front_top, rear_top = 0.6, 1.0
+    za, la = _APRON_Z[pa.cls], _APRON_LEN[pa.cls]
+    for xs, top in ((1.0, front_top), (-1.0, rear_top)):  # bumpers / aprons below the body at both ends
+        b.box(body, (xs * (L - la) / 2, 0, z0 + (za + top) / 2), (la / 2, W / 2, (top - za) / 2), trim)
     axle_x = L / 2 - r - 0.35 * (L / 4.5)
     quat = [math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0]  # cylinder axis along y
     for xs in (axle_x, -axle_x):  # one cylinder per axle: both wheels, half the geometry of four

@@ -196,8 +196,12 @@ def test_depth_png_matches_ray_casting(seq, scenario):
         z_ray = np.where(hit, dist / norm, 0.0)  # the ray's z component is 1 per unit of rays_c
         z_png = depth[vv.ravel(), uu.ravel()]
         in_range = ~hit | (z_ray < 65.0)  # uint16 millimetres cover 65.535 m
-        np.testing.assert_array_equal(z_png[in_range] > 0, hit[in_range], err_msg=f"frame {i}: depth vs ray hits")
-        box = hit & (world.model.geom_type[np.maximum(geomid, 0)] == mujoco.mjtGeom.mjGEOM_BOX)
+        gtype = world.model.geom_type[np.maximum(geomid, 0)]
+        box = hit & (gtype == mujoco.mjtGeom.mjGEOM_BOX)
+        # Where the ray first meets a curved geom, the drawn polygon (inscribed) may show what lies behind
+        # its silhouette instead (possibly beyond 65.5 m, written as 0): hit or not is exact elsewhere.
+        exact = in_range & (~hit | box | (gtype == mujoco.mjtGeom.mjGEOM_MESH))
+        np.testing.assert_array_equal(z_png[exact] > 0, hit[exact], err_msg=f"frame {i}: depth vs ray hits")
         near = box & (z_ray <= 20.0)
         err = np.abs(z_png[near] - z_ray[near])
         assert err.max() <= 1e-3, f"frame {i}: depth error up to {err.max() * 1e3:.2f} mm within 20 m"
