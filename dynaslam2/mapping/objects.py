@@ -5,8 +5,9 @@ Cases (the camera-weak-only case is the static local BA of `LocalMapper.local_ba
 - object weak only: the weak objects' poses, velocities and points, and the keyframes that observe
   them within the last `optim.objects.tail_seconds` (free), the static points they see held constant;
 - camera and object weak: the static local window (the new keyframe and its covisible keyframes,
-  free; the keyframes outside it that see its points most, fixed), its points, and every object
-  observed in those keyframes, jointly.
+  free; the keyframes outside it that see its points most, fixed), its points, and the weak objects'
+  observations in those keyframes within the temporal tail, jointly.
+In both, object observations older than the tail are left out (they keep their estimates).
 """
 
 from __future__ import annotations
@@ -40,12 +41,10 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     """BA with objects for keyframe `kf` (module docstring); returns the parameter counts of the window
     (empty when there was nothing to optimize). `mapper`: the `LocalMapper` (camera, pyramid sigmas)."""
     tail = config.optim.objects.tail_seconds
+    tracks = [objects.tracks[t] for t in weak]
     if camera_weak:
         free_ids, fixed_ids, pts = _static_window(kf, map_, config)
-        window = set(free_ids) | set(fixed_ids)
-        tracks = [t for t in objects.tracks.values() if any(o.kf_id in window for o in t.observations)]
     else:
-        tracks = [objects.tracks[t] for t in weak]
         free_ids = sorted({o.kf_id for t in tracks for o in t.observations
                            if o.kf_id in map_.keyframes and o.timestamp >= kf.timestamp - tail})
         fixed_ids, pts = [], np.zeros(0, dtype=np.int64)
@@ -56,7 +55,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     # Object observations in the window and their points (each object's points once).
     obs_list: list[tuple[int, ObjectObservation]] = []
     for k, tr in enumerate(tracks):
-        obs_list += [(k, o) for o in tr.observations if o.kf_id in kf_index]
+        obs_list += [(k, o) for o in tr.observations if o.kf_id in kf_index and o.timestamp >= kf.timestamp - tail]
     if not obs_list:
         return {}
     P = objects.points
