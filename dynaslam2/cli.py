@@ -130,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("seq", metavar="SEQ", help="sequence folder (ours, KITTI odometry or KITTI tracking)")
     p.add_argument("--mode", required=True, choices=["dynamic", "masked", "static"],
                    help="static: every feature; masked: no features on dynamic-class instances; "
-                        "dynamic: object tracking (not implemented yet)")
+                        "dynamic: DynaSLAM II object tracking (objects.jsonl, tracks.txt)")
     p.add_argument("--out", required=True, metavar="RES", help="results folder")
     p.add_argument("--config", default=None, metavar="FILE", help="YAML file with SLAM config overrides")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
