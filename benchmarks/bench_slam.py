@@ -1,9 +1,10 @@
 """End-to-end SLAM benchmark: per-stage median ms, local-mapping breakdown, fps and accuracy.
 
-    python benchmarks/bench_slam.py [--seq DIR ...] [--mode static] [--frames N] [--set k=v ...]
-        [--profile]
+    python benchmarks/bench_slam.py [--seq DIR ...] [--sim SCENARIO] [--sim-frames N] [--mode static]
+        [--frames N] [--set k=v ...] [--profile]
 
-Default sequence: the real KITTI odometry 06 clip in ../shared/data (1226x370). Stages are those of
+Default: the real KITTI odometry 06 clip in ../shared/data (1226x370), then a simulated 640x480
+sequence (`--sim` scenario, generated into a temporary folder; `--sim none` skips it). Stages are those of
 timing.csv (features, stereo, tracking, objects, local_ba, boxes, total); `local_ba` is all of local
 mapping, with its breakdown (process, triangulation, fusion, ba, kf_culling) medians over keyframes.
 fps = frames / summed `total` (one process: tracking + local mapping + BA).
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import pstats
+import tempfile
 import time
 from pathlib import Path
 
@@ -65,12 +67,22 @@ def bench(seq_path: Path, mode: str, frames: int | None, overrides: list[str], p
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seq", nargs="+", default=[str(DEFAULT_SEQ)], help="sequence folders")
+    ap.add_argument("--sim", default="static", help="also simulate this scenario at 640x480 ('none': skip)")
+    ap.add_argument("--sim-frames", type=int, default=100, help="frames of the simulated sequence")
     ap.add_argument("--mode", default="static", choices=["static", "masked"])
     ap.add_argument("--frames", type=int, default=None)
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--profile", action="store_true", help="print the cProfile top functions")
     args = ap.parse_args()
-    for seq in args.seq:
+    seqs = [s for s in args.seq if Path(s).is_dir()]
+    tmp = tempfile.TemporaryDirectory(prefix="bench-slam-")
+    if args.sim != "none":
+        from sim.generate import generate_sequence  # benchmarks may use the simulator
+        from sim.scenarios import load_scenario
+
+        cfg = load_scenario(args.sim, [f"frames={args.sim_frames}", "image_size=640x480", "seed=0"])
+        seqs.append(str(generate_sequence(cfg, Path(tmp.name) / args.sim, progress=False)))
+    for seq in seqs:
         r = bench(Path(seq), args.mode, args.frames, args.overrides, args.profile)
         print(f"{r['sequence']} ({r['size']}, {r['frames']} frames, {r['keyframes']} keyframes, {r['lost']} lost, "
               f"mode {args.mode})")
@@ -79,6 +91,7 @@ def main() -> None:
         print(f"  fps {r['fps']:.2f} (SLAM time), {r['wall_fps']:.2f} (wall)")
         if "ate_rmse_m" in r:
             print(f"  ATE RMSE {r['ate_rmse_m']:.4f} m, RPE_t {r['rpe_t_m_per_frame']:.4f} m/frame")
+    tmp.cleanup()
 
 
 if __name__ == "__main__":
