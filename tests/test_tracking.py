@@ -172,3 +172,17 @@ def test_epipolar_pairs_equal_the_dense_test(t):
     A, B = np.nonzero((L @ x2.T) ** 2 < th2[None, :] * (L[:, 0] ** 2 + L[:, 1] ** 2)[:, None])
     assert len(A) > 1000
     assert sorted(zip(a.tolist(), b.tolist())) == sorted(zip(A.tolist(), B.tolist()))
+
+
+def test_rgbd_frames_take_depth_from_the_depth_image():
+    """No right image: depth at each keypoint from the depth image and a virtual right coordinate."""
+    data = _textured_frame(None)
+    depth = np.full((480, 640), 5.0, np.float32)
+    depth[:, :100] = 0.0  # no depth there
+    rgbd = FrameData(0, 0.0, data.left, None, depth, None)
+    frame = FrameBuilder(load_config(None, ["mode=static", "orb.n_features=500"]), CAMERA).build(rgbd, {})
+    has = np.rint(frame.keypoints.uv[:, 0]) >= 100
+    assert has.sum() > 100 and np.all(frame.depth[has] == 5.0) and np.all(frame.depth[~has] < 0)
+    assert np.allclose(frame.u_right[has], frame.keypoints.uv[has, 0] - CAMERA.bf / 5.0, atol=1e-4)
+    with pytest.raises(Exception, match="right image or a depth image"):
+        FrameBuilder(load_config(None, ["mode=static"]), CAMERA).build(FrameData(0, 0.0, data.left), {})
