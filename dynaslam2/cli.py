@@ -16,6 +16,8 @@ from dynaslam2 import __version__
 from dynaslam2.errors import InputError
 
 DEMO_FRAMES = 60
+DEMO_SCENARIO = "traffic"
+DEMO_MODE = "masked"
 
 
 def _add_sim_args(p: argparse.ArgumentParser) -> None:
@@ -53,14 +55,22 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from dynaslam2.eval.report import evaluate, format_table, write_metrics
+    from dynaslam2.io.results import METRICS_FILE
+    from dynaslam2.runner import run_sequence
     from sim.generate import generate_sequence
     from sim.scenarios import load_scenario
 
-    cfg = load_scenario("traffic", [f"frames={args.frames}"])
+    cfg = load_scenario(DEMO_SCENARIO, [f"frames={args.frames}"])
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="dynaslam2-demo-"))
     seq = generate_sequence(cfg, out / "sequence", overwrite=True, preview=True, progress=not args.quiet)
     print(f"demo: simulated {cfg.frames} frames of the '{cfg.name}' scenario into {seq}")
     print(f"demo: preview video {seq / 'preview.mp4'} and contact sheet {seq / 'preview.png'}")
+    res = run_sequence(seq, args.mode, out / f"results-{args.mode}", overwrite=True, progress=not args.quiet)
+    metrics = evaluate(seq, res)
+    write_metrics(res / METRICS_FILE, metrics)
+    print(f"demo: '{args.mode}' SLAM results in {res}; scores against the ground truth:")
+    print(format_table(metrics))
     return 0
 
 
@@ -116,11 +126,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("demo", help="simulate the default scenario and write a preview",
-                       description="Simulate the default 'traffic' scenario and write a preview video and "
-                                   "contact sheet.")
+    p = sub.add_parser("demo", help="simulate the default scenario, run SLAM on it and print the scores",
+                       description=f"Simulate the default '{DEMO_SCENARIO}' scenario (with a preview video and "
+                                   "contact sheet), run SLAM on it and print its scores against the ground truth.")
     p.add_argument("--frames", type=int, default=DEMO_FRAMES, help=f"frames to simulate (default {DEMO_FRAMES})")
     p.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
+    p.add_argument("--mode", choices=["dynamic", "masked", "static"], default=DEMO_MODE,
+                   help=f"SLAM mode (default {DEMO_MODE})")
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_demo)
 
