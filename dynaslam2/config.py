@@ -276,9 +276,11 @@ class ObjectsConfig:
     # closer than max_point_depth_m ("new nearby keypoints") creates an object.
     min_new_points: int = 10
     max_point_depth_m: float = 40.0
-    # New object points farther than this from the median of the instance's points are dropped
-    # (keypoints on the mask border that see the background).
+    # New object points farther from the median of the instance's points than max_point_spread_m, or
+    # than point_spread_factor x their median distance + 0.5 m, are dropped (keypoints on the mask
+    # border that see the background).
     max_point_spread_m: float = 5.0
+    point_spread_factor: float = 3.0
     # (a) projection search under the constant-velocity prediction: radius (px at level 0, scaled by
     # the keypoint level), descriptor ratio; fewer matches than min_projection_matches -> (b).
     projection_radius: float = 12.0
@@ -308,9 +310,11 @@ class ObjectsConfig:
     # Velocity known (prediction (a) used) only if the last two observations are this close in time.
     max_velocity_gap_s: float = 0.5
     # Weak object tracking (III-D): an object on an instance with >= weak_min_features keypoints but
-    # < weak_max_tracked tracked points asks for a keyframe (at most every kf_min_frames frames).
-    weak_min_features: int = 40
+    # < weak_max_tracked tracked points, and fewer than weak_tracked_ratio of its keypoints, asks for a
+    # keyframe (at most every kf_min_frames frames).
+    weak_min_features: int = 20
     weak_max_tracked: int = 20
+    weak_tracked_ratio: float = 0.5
     kf_min_frames: int = 2
     # Object-point culling: seen in view this often with a found ratio below cull_found_ratio.
     cull_min_visible: int = 5
@@ -334,11 +338,11 @@ class ObjectsConfig:
             raise ConfigError(f"objects.min_inliers: expected >= 3, got {self.min_inliers}")
         for name in ("max_point_depth_m", "max_point_spread_m", "projection_radius", "max_speed_mps",
                      "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s", "accel_sigma", "position_floor_m",
-                     "initial_speed_sigma"):
+                     "initial_speed_sigma", "point_spread_factor"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",
-                     "projection_nn_ratio"):
+                     "projection_nn_ratio", "weak_tracked_ratio"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"objects.{name}: expected in [0, 1], got {getattr(self, name)}")
 

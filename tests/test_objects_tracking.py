@@ -133,6 +133,27 @@ def test_occluded_object_keeps_its_track_id():
     assert len(objects.tracks) == 2
 
 
+def test_instance_box_association_keeps_the_id_when_no_point_matches():
+    """An object whose appearance changes completely (no descriptor matches) keeps its track id
+    through the instance-to-instance association of its motion-compensated 2D box; a box far away
+    starts a new track."""
+    rng = np.random.default_rng(4)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    objects, trk = ObjectMap(), tracker()
+    T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.8 * i, 0.8, 15.0])) for i in range(6)]
+    ids = []
+    for i in range(6):
+        if i == 4:
+            car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)  # new appearance
+        ids.append([e.track_id for e in trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates])
+    assert all(x == ids[0] for x in ids) and len(ids[0]) == 1
+    far = Body(rng, 1002, 60, (4.0, 1.5, 1.5))
+    far_pose = make_pose(np.eye(3), np.array([6.0, 0.8, 15.0]))
+    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    result = trk.track(make_frame(6, [(far, far_pose)]), None, objects)
+    assert [e.track_id for e in result.estimates] == [max(ids[0]) + 1]
+
+
 def test_object_creation_thresholds():
     """An instance creates an object only with min_new_points close keypoints with depth; the object
     frame is the centroid of its points with the identity rotation."""

@@ -72,7 +72,8 @@ class ObjectObservation:
     eq. 5) and which keypoints observed which object points.
 
     kp_idx / pt_ids: inlier keypoints of the frame and their object points; kf_id: the keyframe made
-    from that frame (-1 if none), which makes the observation a member of BA windows.
+    from that frame (-1 if none), which makes the observation a member of BA windows; origin_uv: where
+    the object-frame origin projected (motion-compensated box association).
     """
 
     frame_index: int
@@ -85,6 +86,7 @@ class ObjectObservation:
     pt_ids: np.ndarray
     box2d: tuple[float, float, float, float] | None = None
     kf_id: int = -1
+    origin_uv: np.ndarray | None = None  # (2,) image position of the object-frame origin, or None behind
 
     @property
     def n_points(self) -> int:

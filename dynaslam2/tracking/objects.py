@@ -120,6 +120,23 @@ class ObjectTracker:
             return last.T_w_o.copy()
         return predict_object_pose(last.T_w_o, last.v_o, last.w_o, timestamp - last.timestamp)
 
+    def _origin_uv(self, frame: Frame, T_w_o: np.ndarray) -> np.ndarray | None:
+        """Pixel of the object-frame origin in `frame`, None when behind the camera."""
+        p_c = frame.T_c_w[:3, :3] @ T_w_o[:3, 3] + frame.T_c_w[:3, 3]
+        return self.camera.project(p_c[None])[0] if p_c[2] > 1e-3 else None
+
+    def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray) -> np.ndarray | None:
+        """The object's last 2D box moved by the image motion of its origin to the predicted pose
+        (instance-to-instance association with motion compensation); the last box when unknown."""
+        last = track.last
+        if last.box2d is None:
+            return None
+        uv = self._origin_uv(frame, T_w_o_pred)
+        if uv is None or last.origin_uv is None:
+            return np.asarray(last.box2d, dtype=float)
+        d = uv - last.origin_uv
+        return np.asarray(last.box2d, dtype=float) + np.r_[d, d]
+
     def _world_points(self, frame: Frame, kp: np.ndarray) -> np.ndarray:
         return frame.unproject(kp, self.camera)
 
@@ -129,10 +146,12 @@ class ObjectTracker:
         return kp[(d > 0) & (d <= self.cfg.max_point_depth_m)]
 
     def _compact(self, X: np.ndarray) -> np.ndarray:
-        """Mask of points within max_point_spread_m of their median (drops mask-border background)."""
+        """Mask of points close to their median: within point_spread_factor x the median distance
+        (+ 0.5 m) and max_point_spread_m (drops keypoints of the mask border that see the background)."""
         if len(X) == 0:
             return np.zeros(0, bool)
-        return np.linalg.norm(X - np.median(X, axis=0), axis=1) <= self.cfg.max_point_spread_m
+        dist = np.linalg.norm(X - np.median(X, axis=0), axis=1)
+        return dist <= min(self.cfg.max_point_spread_m, self.cfg.point_spread_factor * np.median(dist) + 0.5)
 
     def estimate_pose(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_init: np.ndarray,
                       kp: np.ndarray, pts: np.ndarray, robust_init: bool) -> tuple[np.ndarray, np.ndarray] | None:
@@ -178,7 +197,7 @@ class ObjectTracker:
         candidates = self._search_projection(frame, objects, [tr for tr in active if tr.velocity_known], pred, dyn)
         for tr in active:
             if tr.track_id not in candidates:
-                match = self._search_overlap(frame, objects, tr, dyn, inst_ids, boxes)
+                match = self._search_overlap(frame, objects, tr, pred[tr.track_id], dyn, inst_ids, boxes)
                 if match is not None:
                     candidates[tr.track_id] = match
         # Pose per object, the best supported first; an instance holds one object.
@@ -255,15 +274,15 @@ class ObjectTracker:
                 out[tid] = (match[sel].astype(np.int64), pts[sel])
         return out
 
-    def _search_overlap(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, dyn: np.ndarray,
-                        inst_ids: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def _search_overlap(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                        dyn: np.ndarray, inst_ids: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """(b): brute-force matching of the object's points with the keypoints of the instance that
-        overlaps its last box most (the object was seen in the previous frames)."""
+        overlaps its (motion-compensated) last box most (the object was seen in the previous frames)."""
         cfg = self.cfg
-        last = track.last
-        if frame.timestamp - last.timestamp > cfg.max_velocity_gap_s or last.box2d is None or len(inst_ids) == 0:
+        box = self.predicted_box(track, frame, T_w_o_pred)
+        if frame.timestamp - track.last.timestamp > cfg.max_velocity_gap_s or box is None or len(inst_ids) == 0:
             return None
-        iou = box_iou(np.array([last.box2d]), boxes)[0]
+        iou = box_iou(box[None], boxes)[0]
         k = int(np.argmax(iou))
         if iou[k] < cfg.min_overlap_iou:
             return None
@@ -299,7 +318,8 @@ class ObjectTracker:
         box2d = None if not np.all(np.isfinite(box)) else tuple(float(b) for b in box)
         track.observations.append(ObjectObservation(
             frame_index=frame.index, timestamp=frame.timestamp, T_w_o=T_w_o, v_o=v_o, w_o=w_o,
-            instance_id=instance_id, kp_idx=kp.astype(np.int64), pt_ids=pts.astype(np.int64), box2d=box2d))
+            instance_id=instance_id, kp_idx=kp.astype(np.int64), pt_ids=pts.astype(np.int64), box2d=box2d,
+            origin_uv=self._origin_uv(frame, T_w_o)))
         track.velocity_known = known
         P = objects.points
         P.desc[pts] = frame.keypoints.desc[kp]
@@ -389,7 +409,7 @@ class ObjectTracker:
         # Instance-to-instance: box IoU with an object seen in the previous frame.
         prev = [tr for tr in unseen if tr.last.frame_index == frame.index - 1 and tr.last.box2d is not None]
         if prev:
-            iou = box_iou(np.array([box]), np.array([tr.last.box2d for tr in prev]))[0]
+            iou = box_iou(np.array([box]), np.array([self.predicted_box(tr, frame, pred[tr.track_id]) for tr in prev]))[0]
             b = int(np.argmax(iou))
             if iou[b] >= cfg.join_iou:
                 tr = prev[b]
@@ -437,7 +457,7 @@ class ObjectTracker:
             n_matches += obs.n_points
             n_features = int(np.count_nonzero(dyn & (frame.instance_id == obs.instance_id)))
             if len(tr.observations) > 1 and n_features >= self.cfg.weak_min_features \
-                    and obs.n_points < self.cfg.weak_max_tracked:
+                    and obs.n_points < min(self.cfg.weak_max_tracked, self.cfg.weak_tracked_ratio * n_features):
                 weak.append(tid)
         return ObjectFrameResult(self.estimates(objects, frame.index), n_matches, weak)
 
@@ -462,8 +482,9 @@ class ObjectTracker:
             T_o_w = inverse(obs.T_w_o)
             X_o = self._world_points(frame, kp) @ T_o_w[:3, :3].T + T_o_w[:3, 3]
             old = objects.points.X_o[obs.pt_ids]
-            ok = np.linalg.norm(X_o - np.median(old, axis=0), axis=1) <= self.cfg.max_point_spread_m
-            kp, X_o = kp[ok], X_o[ok]
+            if len(old):
+                ok = np.linalg.norm(X_o - np.median(old, axis=0), axis=1) <= self.cfg.max_point_spread_m
+                kp, X_o = kp[ok], X_o[ok]
             new = objects.add_points(tr.track_id, X_o, frame.keypoints.desc[kp])
             obs.kp_idx = np.r_[obs.kp_idx, kp]
             obs.pt_ids = np.r_[obs.pt_ids, new]
