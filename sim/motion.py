@@ -411,8 +411,8 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
 
     n_parked = int(round(cfg.parked_fraction * cfg.n_vehicles))
     _plan_moving(cfg, layout, rng_move, ego, ego_end, cfg.n_vehicles - n_parked, try_add)
-    _plan_parked(cfg, layout, rng_park, ego_end, n_parked, try_add)
-    _plan_pedestrians(cfg, layout, rng_ped, ego_end, try_add)
+    parked = _plan_parked(cfg, layout, rng_park, ego_end, n_parked, try_add)
+    _plan_pedestrians(cfg, layout, rng_ped, ego_end, parked, try_add)
     return MotionPlan(layout, ego, tuple(actors), tuple(props))
 
 
@@ -437,29 +437,49 @@ def _plan_props(cfg, layout: StreetLayout, rng: np.random.Generator) -> list[Pro
     return props
 
 
-def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, n: int, try_add) -> None:
-    """Parked vehicles in the parking strips; with probability 0.75*`occlusion` a vehicle parks right
-    behind or ahead of the last one parked (rows of vehicles hide each other), and `occlusion`
-    raises the share of vans and trucks."""
-    p_large = 0.15 + 0.5 * cfg.occlusion
+def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, n: int,
+                 try_add) -> list[PlannedActor]:
+    """Parked vehicles in the parking strips; returns those placed.
+
+    `occlusion` (occ) packs them into the stretch the camera sees (x from -10 + 15*occ to
+    ego_end + 70 - 40*occ), continues the last row with probability occ (0.8-2.5 m behind or ahead
+    of the last one parked, so each hides part of the next) and raises the share of vans and trucks;
+    any other vehicle keeps (1 - occ) * 12 m from those parked on its side.
+    """
+    occ = cfg.occlusion
+    p_large = 0.15 + 0.5 * occ
     y_strip = layout.half_road + 0.5 * cfg.parking_width
+    x_lo, x_hi = -10.0 + 15.0 * occ, min(layout.x_hi - 10.0, ego_end + 70.0 - 40.0 * occ)
+    spacing = 12.0 * (1.0 - occ)
     parked: list[PlannedActor] = []
+
+    def crowded(x: float, length: float, side: float) -> bool:
+        for p in parked:  # over parked vehicles (a few dozen at most)
+            x_p, y_p, _ = p.trajectory.pose(0.0)
+            if np.sign(y_p) == side and abs(float(x_p) - x) - 0.5 * (p.dims[0] + length) < spacing:
+                return True
+        return False
 
     def make():
         cls = "car" if rng.random() > p_large else ("van" if rng.random() < 0.65 else "truck")
         dims = _dims(rng, cls)
-        if parked and rng.random() < 0.75 * cfg.occlusion:  # continue the last row
+        row = parked and rng.random() < occ
+        if row:  # continue the last row, mostly away from the ego
             nb = parked[-1]
             x_nb, y_nb, _ = nb.trajectory.pose(0.0)
             side = float(np.sign(y_nb))
-            x = float(x_nb) + rng.choice([-1.0, 1.0]) * (0.5 * (nb.dims[0] + dims[0]) + rng.uniform(0.7, 1.6))
-        elif layout.x_int is not None and rng.random() < cfg.occlusion:  # at the corners, hiding the crossing
+            step = 0.5 * (nb.dims[0] + dims[0]) + rng.uniform(0.8, 2.5)
+            x = float(x_nb) + (step if rng.random() < 0.8 else -step)
+            row = x_lo <= x <= x_hi
+        if not row:
             side = -1.0 if rng.random() < 0.5 else 1.0
-            near = layout.cross_half + cfg.sidewalk_width + 0.5 * dims[0] + 2.5
-            x = layout.x_int + rng.choice([-1.0, 1.0]) * rng.uniform(near, near + 20.0)
-        else:
-            side = -1.0 if rng.random() < 0.5 else 1.0
-            x = rng.uniform(-10.0, min(layout.x_hi - 10.0, ego_end + 70.0))
+            if layout.x_int is not None and rng.random() < occ:  # at the corners, hiding the crossing
+                near = layout.cross_half + cfg.sidewalk_width + 0.5 * dims[0] + 2.5
+                x = layout.x_int + rng.choice([-1.0, 1.0]) * rng.uniform(near, near + 20.0)
+            else:
+                x = rng.uniform(x_lo, x_hi)
+            if crowded(x, dims[0], side):
+                x = layout.x_hi + 1e3  # rejected below
         if layout.in_intersection(x, cfg.sidewalk_width + dims[0] / 2 + 2.0):
             x = layout.x_hi + 1e3  # off the street: rejected below
         y = side * (y_strip + rng.uniform(-0.15, 0.15) - 0.5 * max(0.0, dims[1] - 2.0))
@@ -470,6 +490,7 @@ def _plan_parked(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: f
         added = try_add(make, margin=0.4, valid=lambda traj: float(traj.pose(0.0)[0]) < layout.x_hi)
         if added is not None:
             parked.append(added)
+    return parked
 
 
 def _moving_class(rng: np.random.Generator) -> str:
@@ -491,6 +512,8 @@ def _plan_moving(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Traje
     lanes = [(i, False) for i in range(layout.lanes_per_direction)] + \
             [(i, True) for i in range(layout.lanes_per_direction)]
     weights = np.ones(len(lanes))
+    nearby = [j for j, (i, onc) in enumerate(lanes) if (i == 1 and not onc) or (i == 0 and onc)]
+    weights[nearby] = 0.25 + 2.75 * cfg.occlusion  # occlusion brings traffic into the lanes beside the ego
     if cfg.layout != "street":  # ego lane is reserved for followers / the stop line
         weights[0] = 0.0
     weights /= weights.sum()
@@ -504,7 +527,7 @@ def _plan_moving(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Traje
 def _plan_lane(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, lane: tuple[int, bool],
                count: int, try_add) -> None:
     index, oncoming = lane
-    duration, k = cfg.duration, cfg.object_speed
+    duration, k, occ = cfg.duration, cfg.object_speed, cfg.occlusion
     heading = np.pi if oncoming else 0.0
     y = layout.lane_y(index, oncoming)
     ego_lane = index == 0 and not oncoming
@@ -514,14 +537,16 @@ def _plan_lane(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: flo
         cls = _moving_class(rng)
         dims = _dims(rng, cls)
         if ego_lane:  # ahead of the ego and faster, never stopping
-            x0 = rng.uniform(12.0, 40.0 - 25.0 * cfg.occlusion)
+            x0 = rng.uniform(12.0, 40.0 - 25.0 * occ)
             prof = stop_and_go_profile(rng, max(cfg.ego_speed * 1.3, 9.0) * max(k, 1.0), duration, 0.0, 0.1)
         elif oncoming:
-            x0 = rng.uniform(0.3 * ego_end + 30.0, layout.x_hi)
+            lo = 0.3 * ego_end + 30.0 - 20.0 * occ
+            x0 = rng.uniform(lo, max(lo, layout.x_hi - 60.0 * occ))
             prof = stop_and_go_profile(rng, rng.uniform(7.0, 13.0) * k, duration)
-        else:
-            x0 = rng.uniform(-15.0, ego_end + 60.0)
-            prof = stop_and_go_profile(rng, rng.uniform(6.0, 13.0) * k, duration)
+        else:  # occlusion: a platoon ahead whose tail is near the ego, at about its speed, stays in view
+            x0 = rng.uniform(-15.0 + 35.0 * occ, ego_end + 60.0 - 10.0 * occ)
+            v = (1.0 - occ) * rng.uniform(6.0, 13.0) + occ * cfg.ego_speed * rng.uniform(0.85, 1.15)
+            prof = stop_and_go_profile(rng, v * k, duration, 0.3 * (1.0 - occ))
         segs: list[tuple] = [("straight", 1.0)]
         if index > 0 and rng.random() < 0.3:  # lane change towards the centre line
             segs = [("straight", rng.uniform(10.0, 60.0)), ("shift", rng.uniform(30.0, 45.0), layout.lane_width),
@@ -532,7 +557,8 @@ def _plan_lane(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: flo
     def make_follower():
         cls = _moving_class(rng)
         dims = _dims(rng, cls)
-        gap = 0.5 * (last[0].dims[0] + dims[0]) + (1.0 - 0.7 * cfg.occlusion) * rng.uniform(2.5, 7.0)
+        # occlusion closes the gaps (1.5-4 m at occ = 1, 13.5-34 m at occ = 0: few overlaps in the image)
+        gap = 0.5 * (last[0].dims[0] + dims[0]) + rng.uniform(1.5, 4.0) + (1.0 - occ) ** 2 * rng.uniform(12.0, 30.0)
         return cls, dims, last[0].trajectory.follower(rng.uniform(0.8, 1.8), gap)
 
     for _ in range(count):
@@ -637,14 +663,25 @@ def _time_to_travel(prof: SpeedProfile, distance: float) -> float:
     return float(t[i]) if i < len(t) else 300.0
 
 
-def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float, try_add) -> None:
+def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float,
+                      parked: list[PlannedActor], try_add) -> None:
     """Standing pedestrians (parked_fraction), kerb-to-kerb crossers (crosswalks in the intersection
-    layout, mid-block otherwise) and walkers along the sidewalks."""
+    layout, mid-block otherwise) and walkers along the sidewalks.
+
+    `occlusion` (occ): with probability occ a standing pedestrian waits on the sidewalk right behind a
+    parked vehicle, and walkers keep to the kerb side of the sidewalk (behind parked vehicles and
+    kerbside furniture); otherwise a standing pedestrian is redrawn (with probability 1 - occ) where a
+    parked vehicle on its side stands up to 15 m nearer the ego, which would hide it.
+    """
+    occ = cfg.occlusion
     n = cfg.n_pedestrians
     n_standing = int(round(cfg.parked_fraction * n))
     duration, k = cfg.duration, cfg.object_speed
     sw_in, sw_out = layout.kerb, layout.sidewalk_outer
     x_max = min(layout.x_hi - 10.0, ego_end + 60.0)
+    parked_x = np.array([float(p.trajectory.pose(0.0)[0]) for p in parked])
+    parked_side = np.array([float(np.sign(p.trajectory.pose(0.0)[1])) for p in parked])
+    parked_half = np.array([0.5 * p.dims[0] for p in parked])
 
     def sidewalk_x() -> float:
         while True:
@@ -652,11 +689,23 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
             if not layout.in_intersection(x, 1.0):
                 return x
 
+    def unhidden(x: float, side: float) -> float:
+        """x, or an x off the street (rejected) with probability 1 - occ where a parked vehicle on this
+        side stands up to 15 m nearer the ego (it would hide the pedestrian)."""
+        hidden = (parked_side == side) & (parked_x - parked_half < x + 1.0) & (parked_x + parked_half > x - 15.0)
+        return layout.x_hi + 1e3 if hidden.any() and rng.random() > occ else x
+
     def standing():
         dims = _dims(rng, "pedestrian")
+        if len(parked) and rng.random() < occ:  # behind a parked vehicle (a car if any), next to the kerb
+            cars = [j for j, p in enumerate(parked) if p.cls == "car"] or list(range(len(parked)))
+            j = cars[int(rng.integers(len(cars)))]
+            x = parked_x[j] + rng.uniform(-0.8, 0.8) * parked_half[j]
+            y = parked_side[j] * (sw_in + rng.uniform(0.4, 1.0))
+            return "pedestrian", dims, static_trajectory(x, y, rng.uniform(-np.pi, np.pi))
         side = -1.0 if rng.random() < 0.5 else 1.0
         y = side * rng.uniform(sw_in + 0.8, sw_out - 0.6)
-        return "pedestrian", dims, static_trajectory(sidewalk_x(), y, rng.uniform(-np.pi, np.pi))
+        return "pedestrian", dims, static_trajectory(unhidden(sidewalk_x(), side), y, rng.uniform(-np.pi, np.pi))
 
     crossers: list[PlannedActor] = []
 
@@ -673,6 +722,7 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
         else:
             x = rng.uniform(10.0, max(20.0, ego_end + 50.0))
         side = -1.0 if rng.random() < 0.5 else 1.0
+        x = unhidden(x, side)
         y0, length = side * (layout.kerb + 1.0), 2.0 * (layout.kerb + 1.0)
         heading = -side * np.pi / 2
         if v <= 0.0:  # object_speed 0: waits at the kerb
@@ -685,10 +735,11 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
     def walking():
         dims = _dims(rng, "pedestrian")
         side = -1.0 if rng.random() < 0.5 else 1.0
-        y = side * rng.uniform(sw_in + 1.2, sw_out - 0.8)
+        y = side * (sw_in + 1.2 + (1.0 - occ) * rng.uniform(0.0, sw_out - sw_in - 2.0))
         heading = 0.0 if rng.random() < 0.5 else np.pi
         prof = stop_and_go_profile(rng, rng.uniform(1.1, 1.6) * k, duration, stop_prob=0.15, variation=0.1)
-        return "pedestrian", dims, Trajectory(Path.build(sidewalk_x(), y, heading, [("straight", 1.0)]), prof)
+        x = unhidden(sidewalk_x(), side)
+        return "pedestrian", dims, Trajectory(Path.build(x, y, heading, [("straight", 1.0)]), prof)
 
     for i in range(n):
         if i < n_standing:

@@ -386,7 +386,7 @@ def _add_props(b: _Builder, plan: MotionPlan, rng: np.random.Generator) -> None:
 
 # Bottom of the bumpers/aprons at both ends of each vehicle class (m above the road): the box's bottom
 # corners at the ends then carry geometry, so the projected 3D box is tight on the mask in the image.
-_APRON_Z = {"car": 0.06, "van": 0.07, "truck": 0.10}
+_APRON_Z = {"car": 0.04, "van": 0.05, "truck": 0.08}
 _APRON_LEN = {"car": 0.22, "van": 0.25, "truck": 0.3}  # m, shorter than the overhang ahead of the wheels
 
 
@@ -402,7 +402,6 @@ def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) 
     paint = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.4, shininess=0.6)
     glass = b.material(tex.glass(rng, 128, rich=b.rich), specular=0.6, shininess=0.8)
     tyre = b.material(None, rgba=(0.08, 0.08, 0.08, 1), specular=0.05)
-    trim = b.material(None, rgba=(0.16, 0.16, 0.17, 1), specular=0.2)
     z0 = -H / 2  # ground in body coordinates
     r = {"car": 0.32, "van": 0.36, "truck": 0.5}[pa.cls]
     if pa.cls == "car":
@@ -431,7 +430,7 @@ def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) 
         front_top, rear_top = 0.6, 1.0
     za, la = _APRON_Z[pa.cls], _APRON_LEN[pa.cls]
     for xs, top in ((1.0, front_top), (-1.0, rear_top)):  # bumpers / aprons below the body at both ends
-        b.box(body, (xs * (L - la) / 2, 0, z0 + (za + top) / 2), (la / 2, W / 2, (top - za) / 2), trim)
+        b.box(body, (xs * (L - la) / 2, 0, z0 + (za + top) / 2), (la / 2, W / 2, (top - za) / 2), paint)
     axle_x = L / 2 - r - 0.35 * (L / 4.5)
     quat = [math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0]  # cylinder axis along y
     for xs in (axle_x, -axle_x):  # one cylinder per axle: both wheels, half the geometry of four
