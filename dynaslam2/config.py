@@ -276,11 +276,9 @@ class ObjectsConfig:
     # closer than max_point_depth_m ("new nearby keypoints") creates an object.
     min_new_points: int = 10
     max_point_depth_m: float = 40.0
-    # New object points farther from the median of the instance's points than max_point_spread_m, or
-    # than point_spread_factor x their median distance + 0.5 m, are dropped (keypoints on the mask
-    # border that see the background).
+    # New object points farther than this from the median of the instance's points are dropped
+    # (keypoints on the mask border that see the background).
     max_point_spread_m: float = 5.0
-    point_spread_factor: float = 3.0
     # (a) projection search under the constant-velocity prediction: radius (px at level 0, scaled by
     # the keypoint level), descriptor ratio; fewer matches than min_projection_matches -> (b).
     projection_radius: float = 12.0
@@ -325,7 +323,7 @@ class ObjectsConfig:
     # (white acceleration accel_sigma m/s^2; pose-only position covariance from its stereo Jacobian,
     # 1 px at level 0, plus position_floor_m; unknown initial speed initial_speed_sigma m/s).
     filter: bool = True
-    accel_sigma: float = 3.0
+    accel_sigma: float = 1.5
     position_floor_m: float = 0.05
     initial_speed_sigma: float = 10.0
 
@@ -338,7 +336,7 @@ class ObjectsConfig:
             raise ConfigError(f"objects.min_inliers: expected >= 3, got {self.min_inliers}")
         for name in ("max_point_depth_m", "max_point_spread_m", "projection_radius", "max_speed_mps",
                      "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s", "accel_sigma", "position_floor_m",
-                     "initial_speed_sigma", "point_spread_factor"):
+                     "initial_speed_sigma"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",

@@ -146,12 +146,10 @@ class ObjectTracker:
         return kp[(d > 0) & (d <= self.cfg.max_point_depth_m)]
 
     def _compact(self, X: np.ndarray) -> np.ndarray:
-        """Mask of points close to their median: within point_spread_factor x the median distance
-        (+ 0.5 m) and max_point_spread_m (drops keypoints of the mask border that see the background)."""
+        """Mask of points within max_point_spread_m of their median (drops mask-border background)."""
         if len(X) == 0:
             return np.zeros(0, bool)
-        dist = np.linalg.norm(X - np.median(X, axis=0), axis=1)
-        return dist <= min(self.cfg.max_point_spread_m, self.cfg.point_spread_factor * np.median(dist) + 0.5)
+        return np.linalg.norm(X - np.median(X, axis=0), axis=1) <= self.cfg.max_point_spread_m
 
     def estimate_pose(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_init: np.ndarray,
                       kp: np.ndarray, pts: np.ndarray, robust_init: bool) -> tuple[np.ndarray, np.ndarray] | None:
