@@ -412,7 +412,7 @@ def plan_scenario(cfg, seed_seq: np.random.SeedSequence) -> MotionPlan:
     n_parked = int(round(cfg.parked_fraction * cfg.n_vehicles))
     _plan_moving(cfg, layout, rng_move, ego, ego_end, cfg.n_vehicles - n_parked, try_add)
     parked = _plan_parked(cfg, layout, rng_park, ego_end, n_parked, try_add)
-    _plan_pedestrians(cfg, layout, rng_ped, ego_end, parked, try_add)
+    _plan_pedestrians(cfg, layout, rng_ped, ego_end, parked, props, try_add)
     return MotionPlan(layout, ego, tuple(actors), tuple(props))
 
 
@@ -664,14 +664,14 @@ def _time_to_travel(prof: SpeedProfile, distance: float) -> float:
 
 
 def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_end: float,
-                      parked: list[PlannedActor], try_add) -> None:
+                      parked: list[PlannedActor], props: list[Prop], try_add) -> None:
     """Standing pedestrians (parked_fraction), kerb-to-kerb crossers (crosswalks in the intersection
     layout, mid-block otherwise) and walkers along the sidewalks.
 
     `occlusion` (occ): with probability occ a standing pedestrian waits on the sidewalk right behind a
     parked vehicle, and walkers keep to the kerb side of the sidewalk (behind parked vehicles and
-    kerbside furniture); otherwise a standing pedestrian is redrawn (with probability 1 - occ) where a
-    parked vehicle on its side stands up to 15 m nearer the ego, which would hide it.
+    kerbside furniture); with probability 0.9*(1 - occ) a pedestrian is redrawn where a parked
+    vehicle or kerbside prop crosses its line of sight from the ego's lane (it would be hidden).
     """
     occ = cfg.occlusion
     n = cfg.n_pedestrians
@@ -682,6 +682,10 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
     parked_x = np.array([float(p.trajectory.pose(0.0)[0]) for p in parked])
     parked_side = np.array([float(np.sign(p.trajectory.pose(0.0)[1])) for p in parked])
     parked_half = np.array([0.5 * p.dims[0] for p in parked])
+    # occluders of the sidewalks: parked vehicles and props, (x, y, half length)
+    occ_x = np.array(parked_x.tolist() + [p.x for p in props])
+    occ_y = np.array([float(p.trajectory.pose(0.0)[1]) for p in parked] + [p.y for p in props])
+    occ_half = np.array(parked_half.tolist() + [0.5 * p.length for p in props])
 
     def sidewalk_x() -> float:
         while True:
@@ -689,11 +693,16 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
             if not layout.in_intersection(x, 1.0):
                 return x
 
-    def unhidden(x: float, side: float) -> float:
-        """x, or an x off the street (rejected) with probability 1 - occ where a parked vehicle on this
-        side stands up to 15 m nearer the ego (it would hide the pedestrian)."""
-        hidden = (parked_side == side) & (parked_x - parked_half < x + 1.0) & (parked_x + parked_half > x - 15.0)
-        return layout.x_hi + 1e3 if hidden.any() and rng.random() > occ else x
+    y_ego = -0.5 * layout.lane_width
+
+    def unhidden(x: float, y: float) -> float:
+        """x, or an x off the street (rejected) with probability 1 - occ where a parked vehicle or a prop crosses the line of sight from the ego's lane (x from 0 to ego_end) to (x, y)."""
+        if not len(occ_x):
+            return x
+        r = (occ_y - y_ego) / (y - y_ego)  # where the sight line crosses the occluder's y, 0 < r < 1
+        lo, hi = r * x, r * x + (1.0 - r) * min(ego_end, 30.0)  # its x there, over the ego's first 30 m
+        hidden = (r > 0) & (r < 1) & (lo < occ_x + occ_half + 0.5) & (hi > occ_x - occ_half - 0.5)
+        return layout.x_hi + 1e3 if hidden.any() and rng.random() < 0.9 * (1.0 - occ) else x
 
     def standing():
         dims = _dims(rng, "pedestrian")
@@ -705,7 +714,7 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
             return "pedestrian", dims, static_trajectory(x, y, rng.uniform(-np.pi, np.pi))
         side = -1.0 if rng.random() < 0.5 else 1.0
         y = side * rng.uniform(sw_in + 0.8, sw_out - 0.6)
-        return "pedestrian", dims, static_trajectory(unhidden(sidewalk_x(), side), y, rng.uniform(-np.pi, np.pi))
+        return "pedestrian", dims, static_trajectory(unhidden(sidewalk_x(), y), y, rng.uniform(-np.pi, np.pi))
 
     crossers: list[PlannedActor] = []
 
@@ -722,8 +731,8 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
         else:
             x = rng.uniform(10.0, max(20.0, ego_end + 50.0))
         side = -1.0 if rng.random() < 0.5 else 1.0
-        x = unhidden(x, side)
         y0, length = side * (layout.kerb + 1.0), 2.0 * (layout.kerb + 1.0)
+        x = unhidden(x, y0)
         heading = -side * np.pi / 2
         if v <= 0.0:  # object_speed 0: waits at the kerb
             return "pedestrian", dims, static_trajectory(x, y0, heading)
@@ -738,7 +747,7 @@ def _plan_pedestrians(cfg, layout: StreetLayout, rng: np.random.Generator, ego_e
         y = side * (sw_in + 1.2 + (1.0 - occ) * rng.uniform(0.0, sw_out - sw_in - 2.0))
         heading = 0.0 if rng.random() < 0.5 else np.pi
         prof = stop_and_go_profile(rng, rng.uniform(1.1, 1.6) * k, duration, stop_prob=0.15, variation=0.1)
-        x = unhidden(sidewalk_x(), side)
+        x = unhidden(sidewalk_x(), y)
         return "pedestrian", dims, Trajectory(Path.build(x, y, heading, [("straight", 1.0)]), prof)
 
     for i in range(n):

@@ -14,9 +14,13 @@ freezes every other object (those ego-lane leaders excepted) where it is at t = 
 the ego's clearance or leave the streets is redrawn (up to 40 times) and otherwise dropped, so a
 crowded configuration may hold fewer actors than asked for.
 `parked_fraction` is the fraction of vehicles (and of pedestrians) that never move.
-`occlusion` (0..1) raises the share of large parked vehicles, packs parked vehicles tighter,
-brings moving traffic into the lanes next to the ego and adds street furniture (trees, poles) at
-the kerb, so that more of every object is hidden.
+`occlusion` (0..1) is how much of the view near traffic and occluders cover. At 1, parked vehicles
+(more vans and trucks) stand in rows 0.8-2.5 m apart in the stretch the camera sees, standing
+pedestrians wait behind parked cars and walkers keep to the kerb, platoons at about the ego's speed
+drive close together in the lanes beside the ego and kerbside furniture (hedges, kiosks, trees,
+poles) is dense, so objects are partly hidden. At 0, parked vehicles keep 12 m apart, pedestrians
+avoid the stretch behind parked vehicles, followers keep 13.5-34 m gaps, traffic prefers the lanes
+not beside the ego and furniture is sparse (mean visible fraction ~0.9 in `traffic`, ~0.65 at 1).
 """
 
 from __future__ import annotations
