@@ -381,6 +381,7 @@ class StereoRenderer:
         intrinsics: (fx, fy, cx, cy) of the rendered images.
         """
         self.ensure_context()
+        self._gl.make_current()  # another renderer's context may be current
         t0 = time.perf_counter()
         self._update(self.world.camera_left, self._option)
         left = self._colour()
