@@ -53,7 +53,10 @@ class StereoConfig:
     th_high: int = 100
     th_low: int = 50  # a left-right match needs descriptor distance < (th_high + th_low) / 2
     row_band_scale: float = 2.0  # right keypoints are candidates within +-row_band_scale * scale(level) rows
-    sad_window: int = 5  # SAD patch half-size: 11x11
+    sad_window: int = 5  # SAD patch half-width: 11 columns
+    # SAD patch half-height: 11x5. ORB-SLAM2's 11x11 (5) assumes a fronto-parallel patch; on the ground the
+    # disparity grows ~baseline/camera-height px per row, which biases corners by up to ~1.5 px.
+    sad_half_height: int = 2
     sad_search: int = 5  # SAD search +-5 px around the descriptor match, at the keypoint's level
     sad_centre: Literal["mean", "pixel"] = "mean"  # subtract each patch's mean (or centre pixel, ORB-SLAM2)
     max_subpixel_delta: float = 1.0  # parabola vertex further than this from the best SAD offset: rejected
@@ -64,8 +67,9 @@ class StereoConfig:
     def validate(self) -> None:
         if not 0 < self.th_low <= self.th_high <= 256:
             raise ConfigError(f"stereo: expected 0 < th_low <= th_high <= 256, got {self.th_low}, {self.th_high}")
-        if self.sad_window < 1 or self.sad_search < 1:
-            raise ConfigError(f"stereo: sad_window and sad_search must be >= 1, got {self.sad_window}, {self.sad_search}")
+        if self.sad_window < 1 or self.sad_search < 1 or self.sad_half_height < 0:
+            raise ConfigError(f"stereo: expected sad_window >= 1, sad_search >= 1, sad_half_height >= 0, got "
+                              f"{self.sad_window}, {self.sad_search}, {self.sad_half_height}")
         if not (self.row_band_scale > 0 and self.outlier_sad_factor > 0 and self.right_features_factor > 0):
             raise ConfigError("stereo: row_band_scale, outlier_sad_factor and right_features_factor must be positive")
 

@@ -53,38 +53,39 @@ def _row_candidates(kp_left: Keypoints, kp_right: Keypoints, n_rows: int, scale_
     return i, j[np.repeat(first, count) + offs]
 
 
-def _gather_patches(img_l, img_r, su_l, sv_l, su_r, w: int, L: int):
-    """Left (K,k,k) patches and right (K,k,k+2L) strips around integer level coordinates; `ok` where inside."""
+def _gather_patches(img_l, img_r, su_l, sv_l, su_r, w: int, h: int, L: int):
+    """Left (K,2h+1,2w+1) patches and right (K,2h+1,2w+1+2L) strips around integer level coordinates;
+    `ok` where inside."""
     rows, cols = img_l.shape
-    ok = (sv_l - w >= 0) & (sv_l + w < rows) & (su_l - w >= 0) & (su_l + w < cols)
+    ok = (sv_l - h >= 0) & (sv_l + h < rows) & (su_l - w >= 0) & (su_l + w < cols)
     ok &= (su_r - L - w >= 0) & (su_r + L + w < cols)
     idx = np.flatnonzero(ok)
-    k = 2 * w + 1
-    patch_l = sliding_window_view(img_l, (k, k))[sv_l[idx] - w, su_l[idx] - w]
-    strip = sliding_window_view(img_r, (k, k + 2 * L))[sv_l[idx] - w, su_r[idx] - L - w]
+    k, kh = 2 * w + 1, 2 * h + 1
+    patch_l = sliding_window_view(img_l, (kh, k))[sv_l[idx] - h, su_l[idx] - w]
+    strip = sliding_window_view(img_r, (kh, k + 2 * L))[sv_l[idx] - h, su_r[idx] - L - w]
     return ok, patch_l, strip
 
 
 def _sad_curve(patch_l: np.ndarray, strip: np.ndarray, w: int, L: int, centre: str) -> np.ndarray:
-    """(K, 2L+1) SAD of the left patch against the right windows at offsets -L..L, both brightness-
-    normalized by their centre pixel ("pixel", ORB-SLAM2) or their mean ("mean")."""
-    K = len(patch_l)
+    """(K, 2L+1) SAD of the left (K,kh,k) patch against the right windows at offsets -L..L, both
+    brightness-normalized by their centre pixel ("pixel", ORB-SLAM2) or their mean ("mean")."""
+    K, kh = patch_l.shape[:2]
     k, n_off = 2 * w + 1, 2 * L + 1
     patch_l = patch_l.astype(np.float32)
     strip = strip.astype(np.float32)
     if centre == "pixel":
-        ref_l = patch_l[:, w, w]
-        ref_r = strip[:, w, w : w + n_off]  # centre pixel of the window at each offset
+        ref_l = patch_l[:, kh // 2, w]
+        ref_r = strip[:, kh // 2, w : w + n_off]  # centre pixel of the window at each offset
     else:
         ref_l = patch_l.reshape(K, -1).mean(axis=1)
         col_sum = np.concatenate([np.zeros((K, 1), np.float32), np.cumsum(strip.sum(axis=1), axis=1)], axis=1)
-        ref_r = (col_sum[:, k:] - col_sum[:, :-k]) / (k * k)  # box mean of the window at each offset
+        ref_r = (col_sum[:, k:] - col_sum[:, :-k]) / (kh * k)  # box mean of the window at each offset
     centred_l = patch_l - ref_l[:, None, None]
-    rows_r = strip.reshape(K * k, k + 2 * L)  # all strips stacked: offset o = columns o..o+k-1
+    rows_r = strip.reshape(K * kh, k + 2 * L)  # all strips stacked: offset o = columns o..o+k-1
     dists = np.empty((K, n_off), np.float32)
     for o in range(n_off):  # loop over the 2L+1 offsets, vectorized (OpenCV) over keypoints
-        target = (centred_l + ref_r[:, o, None, None]).reshape(K * k, k)
-        absdiff = cv2.absdiff(rows_r[:, o : o + k], target).reshape(K, k * k)
+        target = (centred_l + ref_r[:, o, None, None]).reshape(K * kh, k)
+        absdiff = cv2.absdiff(rows_r[:, o : o + k], target).reshape(K, kh * k)
         dists[:, o] = cv2.reduce(absdiff, 1, cv2.REDUCE_SUM).ravel()
     return dists
 
@@ -144,7 +145,7 @@ def match_stereo(
     if len(i) == 0:
         return u_right, depth
 
-    w, L = cfg.sad_window, cfg.sad_search
+    w, h, L = cfg.sad_window, cfg.sad_half_height, cfg.sad_search
     octave = kp_left.octave[i]
     inv_s = 1.0 / scale_factors[octave]
     su_l = np.rint(kp_left.uv[i, 0] * inv_s).astype(np.int64)
@@ -156,7 +157,7 @@ def match_stereo(
     patches_l, strips = [], []
     for level in np.unique(octave):
         sel = slice(*np.searchsorted(octave, [level, level + 1]))
-        ok_l, patch_l, strip = _gather_patches(pyr_left[level], pyr_right[level], su_l[sel], sv_l[sel], su_r[sel], w, L)
+        ok_l, patch_l, strip = _gather_patches(pyr_left[level], pyr_right[level], su_l[sel], sv_l[sel], su_r[sel], w, h, L)
         ok[sel] = ok_l
         patches_l.append(patch_l)
         strips.append(strip)
