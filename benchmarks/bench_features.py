@@ -1,6 +1,6 @@
 """Median ms of ORB pyramid + extraction (left and right) and stereo matching.
 
-    python benchmarks/bench_features.py [--repeat 15] [--right-factor 1.0] [--cv-threads N]
+    python benchmarks/bench_features.py [--repeat 15] [--right-factor 1.0] [--cv-threads N] [--sad-half-height H]
 
 Images: the real KITTI odometry 06 pair (1226x370) from ../shared/data when present (else a synthetic
 textured pair), and a rendered 640x480 frame of the simulated static street (else KITTI resized).
@@ -86,12 +86,14 @@ def main() -> None:
     parser.add_argument("--n-features", type=int, default=2000)
     parser.add_argument("--right-factor", type=float, default=1.0, help="right-image budget / n_features")
     parser.add_argument("--cv-threads", type=int, default=None, help="cv2.setNumThreads (default: OpenCV's)")
+    parser.add_argument("--sad-half-height", type=int, default=None,
+                        help="stereo SAD window half-height (default: the config's; 5 = ORB-SLAM2's 11x11)")
     args = parser.parse_args()
     if args.cv_threads is not None:
         cv2.setNumThreads(args.cv_threads)
     extractor = ORBExtractor(ORBConfig(n_features=args.n_features))
     n_right = int(round(args.n_features * args.right_factor))
-    stereo_cfg = StereoConfig()
+    stereo_cfg = StereoConfig() if args.sad_half_height is None else StereoConfig(sad_half_height=args.sad_half_height)
     print(f"cv2 threads={cv2.getNumThreads()}, n_features={args.n_features}, right={n_right}; ms: median wall, min wall [median cpu]")
     header = ("image", "pyramid", "extract", "pair", "stereo", "frame")
     print(f"{header[0]:>22} " + " ".join(f"{h:>20}" for h in header[1:]) + "   n_kp  depth%")
