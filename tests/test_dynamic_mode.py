@@ -5,7 +5,6 @@ object trajectories scored by `dynaslam2 eval`'s object metrics."""
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 import pytest
