@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from dynaslam2.map.columns import ColumnStore
+
 _POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.uint8)
 
 
-class MapPoints:
+class MapPoints(ColumnStore):
     """Arrays of map-point attributes (ORB-SLAM2's MapPoint, vectorized).
 
     X_w: position; desc: representative ORB descriptor; normal: mean viewing direction;
@@ -20,51 +22,35 @@ class MapPoints:
     replaced_by: the id of the point this one was fused into (-1 if none).
     """
 
+    COLUMNS = (
+        ("X_w", (3,), np.float64, 0.0),
+        ("desc", (32,), np.uint8, 0),
+        ("normal", (3,), np.float64, 0.0),
+        ("min_dist", (), np.float64, 0.0),
+        ("max_dist", (), np.float64, np.inf),
+        ("n_visible", (), np.int64, 0),
+        ("n_found", (), np.int64, 0),
+        ("n_obs", (), np.int64, 0),
+        ("first_kf", (), np.int64, -1),
+        ("ref_kf", (), np.int64, -1),
+        ("alive", (), bool, False),
+        ("replaced_by", (), np.int64, -1),
+        ("last_frame_seen", (), np.int64, -1),
+    )
+
     def __init__(self, capacity: int = 4096) -> None:
-        self.size = 0
-        self._alloc(capacity)
-
-    def _alloc(self, capacity: int) -> None:
-        def grow(name: str, shape: tuple, dtype, fill) -> None:
-            new = np.full((capacity,) + shape, fill, dtype=dtype)
-            old = getattr(self, name, None)
-            if old is not None:
-                new[: self.size] = old[: self.size]
-            setattr(self, name, new)
-
-        grow("X_w", (3,), np.float64, 0.0)
-        grow("desc", (32,), np.uint8, 0)
-        grow("normal", (3,), np.float64, 0.0)
-        grow("min_dist", (), np.float64, 0.0)
-        grow("max_dist", (), np.float64, np.inf)
-        grow("n_visible", (), np.int64, 0)
-        grow("n_found", (), np.int64, 0)
-        grow("n_obs", (), np.int64, 0)
-        grow("first_kf", (), np.int64, -1)
-        grow("ref_kf", (), np.int64, -1)
-        grow("alive", (), bool, False)
-        grow("replaced_by", (), np.int64, -1)
-        grow("last_frame_seen", (), np.int64, -1)
-        self.capacity = capacity
+        super().__init__(capacity)
 
     def add(self, X_w: np.ndarray, desc: np.ndarray, kf_id: int) -> np.ndarray:
         """Append points created by keyframe `kf_id`; returns their ids."""
-        n = len(X_w)
-        if self.size + n > self.capacity:
-            self._alloc(max(2 * self.capacity, self.size + n))
-        ids = np.arange(self.size, self.size + n)
+        ids = self._append(len(X_w))
         self.X_w[ids] = X_w
         self.desc[ids] = desc
-        self.normal[ids] = 0.0
         self.n_visible[ids] = 1
         self.n_found[ids] = 1
-        self.n_obs[ids] = 0
         self.first_kf[ids] = kf_id
         self.ref_kf[ids] = kf_id
         self.alive[ids] = True
-        self.replaced_by[ids] = -1
-        self.last_frame_seen[ids] = -1
-        self.size += n
         return ids
 
     def resolve(self, ids: np.ndarray) -> np.ndarray:

@@ -12,47 +12,37 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dynaslam2.map.columns import ColumnStore
 
-class ObjectPoints:
+
+class ObjectPoints(ColumnStore):
     """Object points as contiguous arrays (struct of arrays), indexed by a point id.
 
     X_o: position in the frame of object `track`; desc: ORB descriptor (the latest inlier observation);
     n_visible / n_found: projected in view / matched as an inlier (culling); alive: not culled.
     """
 
+    COLUMNS = (
+        ("X_o", (3,), np.float64, 0.0),
+        ("desc", (32,), np.uint8, 0),
+        ("track", (), np.int64, -1),
+        ("n_visible", (), np.int64, 0),
+        ("n_found", (), np.int64, 0),
+        ("alive", (), bool, False),
+    )
+
     def __init__(self, capacity: int = 1024) -> None:
-        self.size = 0
-        self._alloc(capacity)
-
-    def _alloc(self, capacity: int) -> None:
-        def grow(name: str, shape: tuple, dtype, fill) -> None:
-            new = np.full((capacity,) + shape, fill, dtype=dtype)
-            old = getattr(self, name, None)
-            if old is not None:
-                new[: self.size] = old[: self.size]
-            setattr(self, name, new)
-
-        grow("X_o", (3,), np.float64, 0.0)
-        grow("desc", (32,), np.uint8, 0)
-        grow("track", (), np.int64, -1)
-        grow("n_visible", (), np.int64, 0)
-        grow("n_found", (), np.int64, 0)
-        grow("alive", (), bool, False)
-        self.capacity = capacity
+        super().__init__(capacity)
 
     def add(self, track_id: int, X_o: np.ndarray, desc: np.ndarray) -> np.ndarray:
         """Append points of object `track_id`; returns their ids."""
-        n = len(X_o)
-        if self.size + n > self.capacity:
-            self._alloc(max(2 * self.capacity, self.size + n))
-        ids = np.arange(self.size, self.size + n)
+        ids = self._append(len(X_o))
         self.X_o[ids] = X_o
         self.desc[ids] = desc
         self.track[ids] = track_id
         self.n_visible[ids] = 1
         self.n_found[ids] = 1
         self.alive[ids] = True
-        self.size += n
         return ids
 
     def of_track(self, track_id: int) -> np.ndarray:
