@@ -121,7 +121,8 @@ def match_stereo(
     scale_factors,
     cfg: StereoConfig,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Right-image u coordinate and depth (m) of each left keypoint; (N,) float32 each, -1 where none."""
+    """Right-image u coordinate and depth (m) of each left keypoint; (N,) float32 each, -1 where none.
+    `scale_factors` (nominal scale per level) sizes the row band; positions use the pyramids' sizes."""
     n = len(kp_left)
     u_right = np.full(n, -1.0, np.float32)
     depth = np.full(n, -1.0, np.float32)
