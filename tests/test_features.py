@@ -22,6 +22,7 @@ from dynaslam2.features import (
     search_by_projection,
 )
 from dynaslam2.features.matcher import rotation_consistent
+from dynaslam2.features.orb import base_to_level, level_scales, level_to_base
 from dynaslam2.geometry.camera import StereoCamera
 
 KITTI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kitti-odometry-06"
@@ -114,8 +115,62 @@ def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor):
         keep = strong | ~np.isin(cell, cell[strong])
         assert (~strong & keep).sum() > 0  # the test covers cells that fall back to min_th_fast
         expected = {(x, y, s) for (x, y), s in zip(xy[keep].tolist(), score[keep].tolist())}
-        got_xy, got_score = extractor._detect(level, img, None)
+        got_xy, got_score = extractor._detect(img, level_scales(pyr)[level], None)
         assert {(x, y, s) for (x, y), s in zip(got_xy.tolist(), got_score.tolist())} == expected
+
+
+def _gaussian_dots(shape, centres, sigmas) -> np.ndarray:
+    """uint8 image: dark background with bright isotropic Gaussian dots at sub-pixel level-0 centres."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    img = np.full(shape, 40.0)
+    for (cu, cv), sigma in zip(centres, sigmas):
+        img += 200.0 * np.exp(-((xx - cu) ** 2 + (yy - cv) ** 2) / (2.0 * sigma**2))
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def test_level_mapping_follows_the_pyramid_resampling(extractor):
+    """A smooth blob at a known sub-pixel level-0 position: its intensity centroid on every level, mapped
+    with `level_to_base` (pixel centres, actual level sizes), lands on the true position within 0.1 px;
+    the nominal x_l * 1.2**l is off by ~0.5 * (1.2**l - 1) (1.3 px at level 7)."""
+    truth = np.array([311.37, 237.81])
+    img = _gaussian_dots((480, 640), [truth], [12.0])
+    pyr = extractor.build_pyramid(img)
+    scales = level_scales(pyr)
+    assert scales.shape == (8, 2) and np.abs(scales[:, 0] / extractor.scale_factors - 1).max() < 3e-3
+    nominal_err = []
+    for level, p in enumerate(pyr):
+        weight = np.maximum(p.astype(np.float64) - 40.0, 0.0)
+        yy, xx = np.mgrid[0 : p.shape[0], 0 : p.shape[1]]
+        centroid = np.array([(weight * xx).sum(), (weight * yy).sum()]) / weight.sum()
+        uv = level_to_base(centroid, scales[level])
+        assert np.abs(uv - truth).max() < 0.1, (level, uv, truth)
+        np.testing.assert_allclose(base_to_level(uv, scales[level]), centroid, atol=1e-9)
+        nominal_err.append(np.abs(centroid * extractor.scale_factors[level] - truth).max())
+    assert nominal_err[-1] > 1.0, nominal_err
+
+
+@pytest.mark.parametrize("level", range(8))
+def test_keypoint_uv_is_the_level_pixel_centre_in_level_0(extractor, level):
+    """A bright dot placed so that it is centred on a pixel of `level` (level-0 position from the actual
+    level size): FAST finds it there at that level and its reported uv is the true level-0 position
+    within 0.3 px at every level."""
+    shape = (480, 640)
+    pyr_shapes = [p.shape for p in extractor.build_pyramid(np.zeros(shape, np.uint8))]
+    h_l, w_l = pyr_shapes[level]
+    scale_xy = np.array([shape[1] / w_l, shape[0] / h_l])
+    # Dots a dozen level pixels apart (7 each way in the interior), each on a level pixel centre.
+    cols = np.rint(np.linspace(0.3, 0.7, 5) * w_l)
+    rows = np.rint(np.linspace(0.3, 0.7, 5) * h_l)
+    xy_level = np.stack(np.meshgrid(cols, rows), -1).reshape(-1, 2)
+    truth = level_to_base(xy_level, scale_xy)
+    s = extractor.scale_factors[level]
+    img = _gaussian_dots(shape, truth, np.full(len(truth), 0.8 * s))
+    kp = extractor.extract(extractor.build_pyramid(img))
+    uv = kp.uv[kp.octave == level].astype(np.float64)
+    assert len(uv) >= len(truth), (level, len(uv))
+    err = np.linalg.norm(uv[:, None, :] - truth[None, :, :], axis=2).min(axis=0)
+    assert np.all(err < 0.3), (level, err)
 
 
 def test_extraction_deterministic(kitti_left, extractor):
@@ -242,7 +297,7 @@ def _slanted_pair(slope: float, d0: float = 30.0, shape=(240, 320), seed: int = 
 
 def _slanted_errors(cfg: StereoConfig, slope: float) -> np.ndarray:
     """Disparity errors at keypoints on the slanted plane (3 seeds); the true disparity is taken at the
-    keypoint's level pixel centre, (y_level + 0.5) * (H / H_level) - 0.5 rows at level 0."""
+    keypoint's row, its level pixel centre mapped to level 0 (`level_to_base`)."""
     ex = ORBExtractor(ORBConfig(n_features=800))
     camera = StereoCamera(300.0, 300.0, 160.0, 120.0, 0.1, 320, 240)
     errors = []
@@ -252,10 +307,7 @@ def _slanted_errors(cfg: StereoConfig, slope: float) -> np.ndarray:
         kp_l, kp_r = ex.extract(pyr_l), ex.extract(pyr_r)
         u_right, depth = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, ex.scale_factors, cfg)
         has = depth > 0
-        octave = kp_l.octave[has]
-        row_scale = np.array([left.shape[0] / p.shape[0] for p in pyr_l])[octave]
-        v_true = (kp_l.uv[has, 1] / ex.scale_factors[octave] + 0.5) * row_scale - 0.5
-        errors.append(kp_l.uv[has, 0] - u_right[has] - (30.0 + slope * (v_true - 120.0)))
+        errors.append(kp_l.uv[has, 0] - u_right[has] - (30.0 + slope * (kp_l.uv[has, 1] - 120.0)))
     return np.concatenate(errors)
 
 

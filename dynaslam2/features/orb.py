@@ -28,7 +28,8 @@ HALF_PATCH = 15  # IC_Angle radius (ORB-SLAM2's HALF_PATCH_SIZE)
 
 @dataclass
 class Keypoints:
-    """Keypoints of one image; `uv` in level-0 pixels, `desc` 256-bit rBRIEF."""
+    """Keypoints of one image; `uv` in level-0 pixels (exact map from the level, `level_to_base`),
+    `desc` 256-bit rBRIEF."""
 
     uv: np.ndarray  # (N,2) float32
     octave: np.ndarray  # (N,) int32
@@ -79,6 +80,24 @@ def level_budgets(n_features: int, n_levels: int, scale_factor: float) -> np.nda
     budgets = np.rint(first * factor ** np.arange(n_levels)).astype(np.int64)
     budgets[-1] = max(n_features - int(budgets[:-1].sum()), 0)
     return budgets
+
+
+def level_scales(pyramid: list[np.ndarray]) -> np.ndarray:
+    """(n_levels, 2) exact per-axis scales (W / W_l, H / H_l) of each level from the actual (rounded)
+    level image sizes; differs from the nominal scale_factor**l by up to ~0.2% at 640x480."""
+    h, w = pyramid[0].shape[:2]
+    return np.array([(w / p.shape[1], h / p.shape[0]) for p in pyramid], np.float64)
+
+
+def level_to_base(xy: np.ndarray, scale_xy: np.ndarray) -> np.ndarray:
+    """Level pixel coordinates -> level-0 pixels; pixel centres at integers, as cv2.resize maps them:
+    u0 = (x_l + 0.5) * W / W_l - 0.5 per axis. `scale_xy` broadcasts against `xy` (e.g. (N,2) or (N,))."""
+    return (xy + 0.5) * scale_xy - 0.5
+
+
+def base_to_level(uv: np.ndarray, scale_xy: np.ndarray) -> np.ndarray:
+    """Inverse of `level_to_base`: level-0 pixels -> level pixel coordinates."""
+    return (uv + 0.5) / scale_xy - 0.5
 
 
 def _ic_kernels() -> tuple[np.ndarray, np.ndarray]:
@@ -186,7 +205,8 @@ class ORBExtractor:
             if n_features <= 0:
                 raise InputError(f"n_features: expected a positive integer, got {n_features}")
             budgets = level_budgets(int(n_features), self.n_levels, self.cfg.scale_factor)
-        parts = [self._extract_level(level, pyramid[level], mask, int(budgets[level])) for level in range(self.n_levels)]
+        scales = level_scales(pyramid)
+        parts = [self._extract_level(level, pyramid[level], scales[level], mask, int(budgets[level])) for level in range(self.n_levels)]
         return Keypoints.concatenate([p for p in parts if p is not None])
 
     def extract_pair(
@@ -210,7 +230,7 @@ class ORBExtractor:
             return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
         return cv2.KeyPoint.convert(kps), np.fromiter((k.response for k in kps), np.float32, len(kps))
 
-    def _detect(self, level: int, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """FAST candidates (integer xy at this level, score) by ORB-SLAM2's per-cell rule: a cell keeps its
         corners at ini_th_fast, or those at min_th_fast where it has none. FAST at ini_th_fast runs on
         the level; FAST at min_th_fast runs on a copy where the cells that have corners are blanked except
@@ -231,9 +251,9 @@ class ORBExtractor:
         def usable(xy: np.ndarray) -> np.ndarray:
             ok = (xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)
             if mask is not None:
-                s = self.scale_factors[level]
-                col = np.clip(np.rint(xy[:, 0] * s).astype(np.int64), 0, mask.shape[1] - 1)
-                row = np.clip(np.rint(xy[:, 1] * s).astype(np.int64), 0, mask.shape[0] - 1)
+                uv = level_to_base(xy.astype(np.float64), scale_xy)
+                col = np.clip(np.rint(uv[:, 0]).astype(np.int64), 0, mask.shape[1] - 1)
+                row = np.clip(np.rint(uv[:, 1]).astype(np.int64), 0, mask.shape[0] - 1)
                 ok &= mask[row, col]
             return ok
 
@@ -280,10 +300,11 @@ class ORBExtractor:
         idx = np.fromiter((k.class_id for k in kps_out), np.int64, len(kps_out))
         return idx, desc
 
-    def _extract_level(self, level: int, img: np.ndarray, mask: np.ndarray | None, budget: int) -> Keypoints | None:
+    def _extract_level(self, level: int, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, budget: int) -> Keypoints | None:
+        """Keypoints of one level; `scale_xy` = (W / W_l, H / H_l) maps them to level 0 (`level_to_base`)."""
         if budget <= 0:
             return None
-        xy, resp = self._detect(level, img, mask)
+        xy, resp = self._detect(img, scale_xy, mask)
         if len(xy) == 0:
             return None
         keep = spread_best(xy, resp, budget, float(img.shape[0] * img.shape[1]))
@@ -293,5 +314,5 @@ class ORBExtractor:
         idx, desc = self._describe(level, img, xy, angle)
         order = np.argsort(idx, kind="stable")
         idx, desc = idx[order], desc[order]
-        uv = (xy[idx] * self.scale_factors[level]).astype(np.float32)
+        uv = level_to_base(xy[idx].astype(np.float64), scale_xy).astype(np.float32)
         return Keypoints(uv, np.full(len(idx), level, np.int32), angle[idx], resp[idx], np.ascontiguousarray(desc))

@@ -4,7 +4,8 @@ ComputeStereoFromRGBD, ref. [1]).
 Stereo: right keypoints are candidates for a left keypoint when their row band (+-row_band_scale x
 scale of their level) covers its row, their octave is within +-1, and the disparity is in
 [0, bf / baseline]. The best descriptor distance must be < (th_high + th_low) / 2. It is refined by
-a SAD search (+-sad_search px) on the keypoint's level image with a parabola sub-pixel fit;
+a SAD search (+-sad_search px) on the keypoint's level image with a parabola sub-pixel fit (level and
+level-0 coordinates mapped exactly, `level_to_base`: pixel centres and the actual level sizes);
 matches with SAD > outlier_sad_factor x median SAD are dropped; depth = bf / disparity.
 
 SAD window: 11 columns x 5 rows (ORB-SLAM2: 11x11). A window compares fronto-parallel patches, but on
@@ -32,7 +33,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from dynaslam2.config import StereoConfig
 from dynaslam2.errors import InputError
 from dynaslam2.features.matcher import hamming_pairs
-from dynaslam2.features.orb import Keypoints
+from dynaslam2.features.orb import Keypoints, base_to_level, level_scales, level_to_base
 from dynaslam2.geometry.camera import StereoCamera
 
 
@@ -120,7 +121,8 @@ def match_stereo(
     scale_factors,
     cfg: StereoConfig,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Right-image u coordinate and depth (m) of each left keypoint; (N,) float32 each, -1 where none."""
+    """Right-image u coordinate and depth (m) of each left keypoint; (N,) float32 each, -1 where none.
+    `scale_factors` (nominal scale per level) sizes the row band; positions use the pyramids' sizes."""
     n = len(kp_left)
     u_right = np.full(n, -1.0, np.float32)
     depth = np.full(n, -1.0, np.float32)
@@ -154,12 +156,12 @@ def match_stereo(
 
     w, h, L = cfg.sad_window, cfg.sad_half_height, cfg.sad_search
     octave = kp_left.octave[i]
-    inv_s = 1.0 / scale_factors[octave]
-    su_l = np.rint(kp_left.uv[i, 0] * inv_s).astype(np.int64)
-    sv_l = np.rint(kp_left.uv[i, 1] * inv_s).astype(np.int64)
-    su_r = np.rint(u_r[j] * inv_s).astype(np.int64)
+    scale_xy = level_scales(pyr_left)[octave]  # exact level <-> level-0 maps (actual level sizes)
+    su_l = np.rint(base_to_level(u_l[i], scale_xy[:, 0])).astype(np.int64)
+    sv_l = np.rint(base_to_level(kp_left.uv[i, 1].astype(np.float64), scale_xy[:, 1])).astype(np.int64)
+    su_r = np.rint(base_to_level(u_r[j], scale_xy[:, 0])).astype(np.int64)
     order = np.argsort(octave, kind="stable")  # gather level by level, then one SAD pass
-    i, octave, su_l, sv_l, su_r = i[order], octave[order], su_l[order], sv_l[order], su_r[order]
+    i, octave, su_l, sv_l, su_r, scale_xy = i[order], octave[order], su_l[order], sv_l[order], su_r[order], scale_xy[order]
     ok = np.zeros(len(i), bool)
     patches_l, strips = [], []
     for level in np.unique(octave):
@@ -168,13 +170,13 @@ def match_stereo(
         ok[sel] = ok_l
         patches_l.append(patch_l)
         strips.append(strip)
-    i, octave, su_r = i[ok], octave[ok], su_r[ok]
+    i, su_r, scale_u = i[ok], su_r[ok], scale_xy[ok, 0]
     if len(i) == 0:
         return u_right, depth
     dists = _sad_curve(np.concatenate(patches_l), np.concatenate(strips), w, L, cfg.sad_centre)
     inc, delta, sad, ok = _parabola(dists, L)
     ok &= np.abs(delta) <= cfg.max_subpixel_delta
-    best_ur = scale_factors[octave] * (su_r + inc + delta)
+    best_ur = level_to_base(su_r + inc + delta, scale_u)  # a level disparity scales by W / W_l
     disparity = u_l[i] - best_ur
     ok &= (disparity >= min_d) & (disparity < max_d)
     i, best_ur, disparity, sad = i[ok], best_ur[ok], disparity[ok], sad[ok]
