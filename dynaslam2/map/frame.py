@@ -10,8 +10,33 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
 
 
+class StereoView:
+    """Geometry shared by frames and keyframes: needs `T_c_w`, `keypoints`, `u_right`, `depth`."""
+
+    def __len__(self) -> int:
+        return len(self.keypoints)
+
+    @property
+    def T_w_c(self) -> np.ndarray:
+        return inverse(self.T_c_w)
+
+    @property
+    def center_w(self) -> np.ndarray:
+        return self.T_w_c[:3, 3]
+
+    def unproject(self, idx: np.ndarray, camera: StereoCamera) -> np.ndarray:
+        """World points of keypoints `idx` that have depth (caller selects depth > 0)."""
+        X_c = camera.backproject(self.keypoints.uv[idx].astype(float), self.depth[idx])
+        T_w_c = self.T_w_c
+        return X_c @ T_w_c[:3, :3].T + T_w_c[:3, 3]
+
+    def measurements(self, idx: np.ndarray) -> np.ndarray:
+        """(K, 3) stereo measurements [u, v, uR] (uR < 0: monocular) of keypoints `idx`."""
+        return np.column_stack([self.keypoints.uv[idx].astype(float), self.u_right[idx].astype(float)])
+
+
 @dataclass
-class Frame:
+class Frame(StereoView):
     """Features of one stereo/RGB-D frame (ORB-SLAM2's Frame).
 
     keypoints: `dynaslam2.features.orb.Keypoints` of the left image (level-0 pixel coordinates).
@@ -41,27 +66,6 @@ class Frame:
             self.point_ids = np.full(n, -1, dtype=np.int64)
         if self.outlier is None:
             self.outlier = np.zeros(n, dtype=bool)
-
-    def __len__(self) -> int:
-        return len(self.keypoints)
-
-    @property
-    def T_w_c(self) -> np.ndarray:
-        return inverse(self.T_c_w)
-
-    @property
-    def center_w(self) -> np.ndarray:
-        return self.T_w_c[:3, 3]
-
-    def unproject(self, idx: np.ndarray, camera: StereoCamera) -> np.ndarray:
-        """World points of keypoints `idx` that have depth (caller selects depth > 0)."""
-        X_c = camera.backproject(self.keypoints.uv[idx].astype(float), self.depth[idx])
-        T_w_c = self.T_w_c
-        return X_c @ T_w_c[:3, :3].T + T_w_c[:3, 3]
-
-    def measurements(self, idx: np.ndarray) -> np.ndarray:
-        """(K, 3) stereo measurements [u, v, uR] (uR < 0: monocular) of keypoints `idx`."""
-        return np.column_stack([self.keypoints.uv[idx].astype(float), self.u_right[idx].astype(float)])
 
     def tracked_mask(self) -> np.ndarray:
         """Keypoints with a map point that survived the last pose optimization."""

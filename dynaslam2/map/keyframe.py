@@ -6,13 +6,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import inverse
-from dynaslam2.map.frame import Frame
+from dynaslam2.map.frame import Frame, StereoView
 
 
 @dataclass
-class KeyFrame:
+class KeyFrame(StereoView):
     """ORB-SLAM2's KeyFrame: the features of a frame, its pose and its map points.
 
     point_ids: (N,) map point observed by each keypoint or -1 (kept in sync with `Map`'s
@@ -50,25 +48,6 @@ class KeyFrame:
             instance_id=frame.instance_id, class_id=frame.class_id, static=frame.static,
             th_depth=frame.th_depth, segment=segment,
         )
-
-    def __len__(self) -> int:
-        return len(self.keypoints)
-
-    @property
-    def T_w_c(self) -> np.ndarray:
-        return inverse(self.T_c_w)
-
-    @property
-    def center_w(self) -> np.ndarray:
-        return -self.T_c_w[:3, :3].T @ self.T_c_w[:3, 3]
-
-    def unproject(self, idx: np.ndarray, camera: StereoCamera) -> np.ndarray:
-        X_c = camera.backproject(self.keypoints.uv[idx].astype(float), self.depth[idx])
-        T_w_c = self.T_w_c
-        return X_c @ T_w_c[:3, :3].T + T_w_c[:3, 3]
-
-    def measurements(self, idx: np.ndarray) -> np.ndarray:
-        return np.column_stack([self.keypoints.uv[idx].astype(float), self.u_right[idx].astype(float)])
 
     def matched(self) -> np.ndarray:
         """Indices of keypoints with a map point."""
