@@ -40,6 +40,18 @@ def sample_points_in_view(
     return transform(inverse(T_c_w), X_c)
 
 
+def points_first_seen(
+    rng: np.random.Generator, camera: StereoCamera, T_c_w: np.ndarray, n_points: int, depth_range
+) -> tuple[np.ndarray, np.ndarray]:
+    """`n_points` world points, each drawn in the view of a random keyframe: (first keyframe (n,), X_w (n, 3))."""
+    first = rng.integers(0, len(T_c_w), n_points)
+    X_w = np.empty((n_points, 3))
+    for kf in range(len(T_c_w)):
+        sel = first == kf
+        X_w[sel] = sample_points_in_view(rng, camera, T_c_w[kf], int(sel.sum()), depth_range)
+    return first, X_w
+
+
 def observe(
     rng: np.random.Generator,
     camera: StereoCamera,
@@ -104,11 +116,7 @@ def make_window(
     twist[:, 4] = 0.02 * np.sin(k / 3.0)
     T_w_c = se3_exp(twist)
     T_c_w = inverse(T_w_c)
-    first = rng.integers(0, n_keyframes, n_points)
-    X_w = np.empty((n_points, 3))
-    for kf in range(n_keyframes):
-        sel = first == kf
-        X_w[sel] = sample_points_in_view(rng, camera, T_c_w[kf], int(sel.sum()), depth_range)
+    first, X_w = points_first_seen(rng, camera, T_c_w, n_points, depth_range)
     obs_pt = np.repeat(np.arange(n_points), track_length)
     obs_kf = np.repeat(first, track_length) + np.tile(np.arange(track_length), n_points)
     keep = obs_kf < n_keyframes

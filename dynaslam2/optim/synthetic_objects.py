@@ -16,7 +16,7 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, make_pose, se3_exp
 from dynaslam2.optim.object_ba import ObjectBAProblem
 from dynaslam2.optim.object_pose import predict_object_pose
-from dynaslam2.optim.synthetic import observe, perturb_poses, sample_points_in_view
+from dynaslam2.optim.synthetic import observe, perturb_poses, points_first_seen
 
 
 @dataclass
@@ -71,11 +71,7 @@ def make_object_window(
     twist[:, 4] = 0.03 * np.sin(times)
     T_c_w = inverse(se3_exp(twist))
     # static points: seen by up to `static_track` consecutive keyframes
-    first = rng.integers(0, n_keyframes, n_static)
-    X_w = np.empty((n_static, 3))
-    for kf in range(n_keyframes):
-        sel = first == kf
-        X_w[sel] = sample_points_in_view(rng, camera, T_c_w[kf], int(sel.sum()), static_depth)
+    first, X_w = points_first_seen(rng, camera, T_c_w, n_static, static_depth)
     obs_pt = np.repeat(np.arange(n_static), static_track)
     obs_kf = np.repeat(first, static_track) + np.tile(np.arange(static_track), n_static)
     keep = obs_kf < n_keyframes
