@@ -26,6 +26,24 @@ def hamming_pairs(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
     return np.bitwise_count(x).sum(axis=1, dtype=np.int32)
 
 
+def hamming_pairs_within(desc_a: np.ndarray, desc_b: np.ndarray, ia: np.ndarray, ib: np.ndarray,
+                         max_dist: int) -> tuple[np.ndarray, np.ndarray]:
+    """Positions k of the index pairs (ia[k], ib[k]) whose Hamming distance is <= max_dist, and those
+    distances (int32). For selective thresholds on many pairs: the first two 64-bit words already
+    exceed max_dist for most unrelated descriptors, so only the survivors read the other two."""
+    wa = np.ascontiguousarray(_as_u64(desc_a).T)  # (4, N): one contiguous array per word
+    wb = np.ascontiguousarray(_as_u64(desc_b).T)
+    d = np.bitwise_count(wa[0][ia] ^ wb[0][ib])
+    d += np.bitwise_count(wa[1][ia] ^ wb[1][ib])  # <= 128: fits the uint8 of bitwise_count
+    pos = np.flatnonzero(d <= max_dist)
+    ia, ib = ia[pos], ib[pos]
+    dist = d[pos].astype(np.int32)
+    dist += np.bitwise_count(wa[2][ia] ^ wb[2][ib])
+    dist += np.bitwise_count(wa[3][ia] ^ wb[3][ib])
+    ok = dist <= max_dist
+    return pos[ok], dist[ok]
+
+
 def _hamming_blocks(desc_a: np.ndarray, desc_b: np.ndarray, chunk: int = 128):
     """Yield (row offset, (rows, M) uint16 Hamming distances) over row blocks that stay in cache:
     xor + popcount per 64-bit word."""

@@ -10,7 +10,7 @@ import numpy as np
 
 from dynaslam2.config import SlamConfig
 from dynaslam2.features.matcher import (
-    hamming_pairs, rotation_consistent, search_by_projection, unique_by_distance,
+    hamming_pairs_within, rotation_consistent, search_by_projection, unique_by_distance,
 )
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import hat
@@ -21,13 +21,11 @@ from dynaslam2.optim.local_ba import BAProblem, local_bundle_adjustment
 from dynaslam2.tracking.camera import predicted_levels, rigid, transform_points
 
 
-def epipolar_pairs(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndarray,
-                   th2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All (i, j) with keypoint j of image 2 within sqrt(th2[j]) px of the epipolar line of keypoint
-    i of image 1 (ORB-SLAM2's CheckDistEpipolarLine), without the dense N1 x N2 test: every epipolar
-    line passes through the epipole, so lines are angles phi of that pencil (in normalized
-    coordinates); each keypoint j gets the window of angles whose lines can pass within its
-    threshold, and only the pairs inside are tested exactly. x1, x2: (N, 3) homogeneous pixels."""
+def _pencil_windows(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndarray, th2: np.ndarray):
+    """Candidate pairs of `epipolar_pairs` without the dense N1 x N2 test: every epipolar line passes
+    through the epipole, so lines are angles phi of that pencil (in normalized coordinates); each
+    keypoint j of image 2 gets the window of angles whose lines can pass within its threshold.
+    Returns (F21, a, b): the fundamental matrix and the candidate pairs, grouped by b."""
     K_inv = np.linalg.inv(K)
     F21 = K_inv.T @ hat(T_2_1[:3, 3]) @ T_2_1[:3, :3] @ K_inv
     E21 = hat(T_2_1[:3, 3]) @ T_2_1[:3, :3]
@@ -51,17 +49,42 @@ def epipolar_pairs(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndar
     half = np.minimum(np.arcsin(np.minimum(ratio, 1.0)), np.pi / 2 - 1e-9)
     order = np.argsort(phi1, kind="stable")
     phi_sorted = np.concatenate([phi1[order] - np.pi, phi1[order], phi1[order] + np.pi])
-    idx_sorted = np.tile(order, 3)
     lo = np.searchsorted(phi_sorted, phi2 - half, side="left")
     hi = np.searchsorted(phi_sorted, phi2 + half, side="right")
     count = hi - lo
-    b = np.repeat(np.arange(len(x2)), count)
-    offs = np.arange(len(b)) - np.repeat(np.cumsum(count) - count, count)
-    a = idx_sorted[np.repeat(lo, count) + offs]
-    L1 = x1 @ F21.T  # exact test in pixels
+    # Pair k of keypoint j reads position lo[j] + (k - first pair of j) of the sorted copies.
+    pos = np.arange(int(count.sum())) + np.repeat(lo - (np.cumsum(count) - count), count)
+    return F21, np.tile(order, 3)[pos], np.repeat(np.arange(len(x2)), count)
+
+
+def _near_epipolar_line(x1: np.ndarray, x2: np.ndarray, F21: np.ndarray, th2: np.ndarray,
+                        a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact test in pixels (ORB-SLAM2's CheckDistEpipolarLine) of the pairs (a, b)."""
+    L1 = x1 @ F21.T
     num = np.einsum("ij,ij->i", L1[a], x2[b])
-    ok = num**2 < th2[b] * (L1[a, 0] ** 2 + L1[a, 1] ** 2)
+    return num**2 < th2[b] * (L1[a, 0] ** 2 + L1[a, 1] ** 2)
+
+
+def epipolar_pairs(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndarray,
+                   th2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All (i, j) with keypoint j of image 2 within sqrt(th2[j]) px of the epipolar line of keypoint
+    i of image 1 (ORB-SLAM2's CheckDistEpipolarLine), without the dense N1 x N2 test (candidates of
+    `_pencil_windows`, then the exact test). x1, x2: (N, 3) homogeneous pixels."""
+    F21, a, b = _pencil_windows(x1, x2, K, T_2_1, th2)
+    ok = _near_epipolar_line(x1, x2, F21, th2, a, b)
     return a[ok], b[ok]
+
+
+def epipolar_matches(x1: np.ndarray, x2: np.ndarray, K: np.ndarray, T_2_1: np.ndarray, th2: np.ndarray,
+                     desc1: np.ndarray, desc2: np.ndarray, max_dist: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs of `epipolar_pairs` whose descriptors (desc1 of x1, desc2 of x2) are within `max_dist`
+    Hamming distance, and those distances. The descriptor test runs first: it keeps ~0.05% of the
+    candidates at ORB-SLAM2's TH_LOW, so the exact line test only sees those."""
+    F21, a, b = _pencil_windows(x1, x2, K, T_2_1, th2)
+    k, dist = hamming_pairs_within(desc1, desc2, a, b, max_dist)
+    a, b = a[k], b[k]
+    ok = _near_epipolar_line(x1, x2, F21, th2, a, b)
+    return a[ok], b[ok], dist[ok]
 
 
 class LocalMapper:
@@ -169,12 +192,8 @@ class LocalMapper:
             x1 = np.column_stack([kf1.keypoints.uv[i1].astype(np.float64), np.ones(len(i1))])
             x2 = np.column_stack([kf2.keypoints.uv[i2].astype(np.float64), np.ones(len(i2))])
             th2 = 3.84 * self.level_sigma2[kf2.keypoints.octave[i2]]
-            a, b = epipolar_pairs(x1, x2, cam.K, T_2_1, th2)
-            if len(a) == 0:
-                continue
-            dist = hamming_pairs(kf1.keypoints.desc[i1[a]], kf2.keypoints.desc[i2[b]])
-            ok = dist <= self.config.matcher.th_low
-            a, b, dist = a[ok], b[ok], dist[ok]
+            a, b, dist = epipolar_matches(x1, x2, cam.K, T_2_1, th2, kf1.keypoints.desc[i1],
+                                          kf2.keypoints.desc[i2], self.config.matcher.th_low)
             if len(a) == 0:
                 continue
             order = np.lexsort((b, dist, a))
