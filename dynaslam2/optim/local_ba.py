@@ -27,6 +27,7 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
 from dynaslam2.optim.gtsam_utils import (
     add_stereo_factors,
+    add_stereo_projection_factors,
     allocate_keys,
     extract_points,
     extract_poses,
@@ -124,9 +125,12 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
         prior = gtsam.noiseModel.Isotropic.Sigma(6, FIXED_POSE_SIGMA)
         for key in fixed_keys.tolist():
             graph.addPriorPose3(key, values.atPose3(key), prior)
-        add_stereo_factors(graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]], problem.meas[use],
-                           problem.inv_sigma2[use], camera, np.sqrt(cfg.chi2_mono) if robust else None,
-                           np.sqrt(cfg.chi2_stereo) if robust else None)
+        # Huber on the whole 3-dof stereo residual (Python-built stereo factors); without kernel the
+        # C++-built projection pairs have exactly the same cost at ~1/6 of the build time.
+        add_factors = add_stereo_factors if robust else add_stereo_projection_factors
+        add_factors(graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]], problem.meas[use],
+                    problem.inv_sigma2[use], camera, np.sqrt(cfg.chi2_mono) if robust else None,
+                    np.sqrt(cfg.chi2_stereo) if robust else None)
         params = lm_params(cfg, n_iter, cfg.ba_relative_error_tol, np.concatenate([pt_key[pt_idx], kf_key[kf_idx]]))
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
         t_solve = time.perf_counter()
