@@ -15,7 +15,12 @@ from dynaslam2.geometry.se3 import inverse, se3_exp, se3_log, transform
 from dynaslam2.optim import BAProblem, local_bundle_adjustment
 from dynaslam2.optim.gtsam_utils import add_stereo_factors
 from dynaslam2.optim.object_ba import object_bundle_adjustment, temporal_tail
-from dynaslam2.optim.object_factors import direct_projection_factor, motion_factor, motion_residuals
+from dynaslam2.optim.object_factors import (
+    direct_projection_factor,
+    motion_factor,
+    motion_factor_moments,
+    motion_residuals,
+)
 from dynaslam2.optim.object_pose import (
     motion_increment,
     object_velocity,
@@ -114,6 +119,42 @@ def test_motion_factor_huber_weights():
     w = np.repeat(np.sqrt(np.minimum(1.0, np.sqrt(delta2 / c2))), 3)
     assert np.allclose(A_r, A * w[:, None]) and np.allclose(b_r, b * w)
     assert np.isclose(robust.error(values), huber_cost(c2, delta2).sum())
+
+
+@pytest.mark.parametrize("parametrization", ["camera_in_object", "direct"])
+@pytest.mark.parametrize("delta2", [None, 7.815])
+def test_motion_factor_moments_has_the_stacked_normal_equations(parametrization, delta2):
+    """Eq. (4) in 12 rows (moments of the constant points): the linearization gives exactly the
+    stacked factor's A^T A, A^T b and b^T b (Huber weights included), and the same Huber cost."""
+    rng = np.random.default_rng(2)
+    values, X_o = motion_values(rng, 40)
+    keys = [0, 1, 2, 3, 4] if parametrization == "camera_in_object" else [0, 1, 4]
+    stacked = motion_factor(keys, parametrization, 0.2, 0.01, delta2, X_o=X_o)
+    moments = motion_factor_moments(keys, parametrization, 0.2, 0.01, delta2, X_o)
+    A, b = stacked.linearize(values).jacobian()
+    A_m, b_m = moments.linearize(values).jacobian()
+    assert A_m.shape == (12, A.shape[1])
+    assert np.abs(A_m.T @ A_m - A.T @ A).max() < 1e-12 * np.abs(A.T @ A).max()
+    assert np.abs(A_m.T @ b_m - A.T @ b).max() < 1e-12 * np.abs(A.T @ b).max()
+    assert np.isclose(b_m @ b_m, b @ b, rtol=1e-12)
+    if delta2 is not None:
+        e = motion_factor(keys, parametrization, 0.2, 0.01, None, X_o=X_o).unwhitenedError(values).reshape(-1, 3)
+        assert (np.einsum("ij,ij->i", e, e) > delta2).sum() >= 3  # the kernel is active on some points
+    assert np.isclose(moments.error(values), stacked.error(values), rtol=1e-12)
+
+
+def test_moments_and_stacked_motion_terms_reach_the_same_optimum():
+    """The whole BA with eq. (4) in 12 rows per frame pair or 3 rows per point: same result."""
+    w = window(4, n_keyframes=5, n_static=200, n_object_points=25)
+    cfg = OptimConfig(ba_relative_error_tol=0.0, ba_iterations_robust=10, ba_iterations_refine=15)
+    stacked_cfg = dataclasses.replace(cfg, objects=ObjectOptimConfig(motion_form="stacked"))
+    moments = object_bundle_adjustment(w.problem, CAMERA, cfg)
+    stacked = object_bundle_adjustment(w.problem, CAMERA, stacked_cfg)
+    assert np.array_equal(moments.obj_inlier, stacked.obj_inlier) and np.array_equal(moments.inlier, stacked.inlier)
+    assert np.abs(moments.T_c_w - stacked.T_c_w).max() < 1e-8
+    assert np.abs(moments.T_w_o - stacked.T_w_o).max() < 1e-8
+    assert np.abs(np.hstack([moments.v_o - stacked.v_o, moments.w_o - stacked.w_o])).max() < 1e-6
+    assert np.isclose(moments.final_error, stacked.final_error, rtol=1e-9)
 
 
 def test_velocity_smoothness_is_the_builtin_between_factor():

@@ -64,7 +64,12 @@ from dynaslam2.optim.gtsam_utils import (
     lm_params,
 )
 from dynaslam2.optim.local_ba import FIXED_POSE_SIGMA, BAProblem, local_bundle_adjustment
-from dynaslam2.optim.object_factors import direct_projection_factor, motion_factor, motion_residuals
+from dynaslam2.optim.object_factors import (
+    direct_projection_factor,
+    motion_factor,
+    motion_factor_moments,
+    motion_residuals,
+)
 from dynaslam2.optim.pose_only import pose_only_factor
 from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, is_stereo, residuals
 
@@ -343,6 +348,9 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
         if ocfg.motion_points_variable:
             graph.push_back(motion_factor(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
                                           ocfg.chi2_motion, point_keys=opt_key[pts]))
+        elif ocfg.motion_form == "moments":
+            graph.push_back(motion_factor_moments(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
+                                                  ocfg.chi2_motion, est.X_o[pts].copy()))
         else:
             graph.push_back(motion_factor(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
                                           ocfg.chi2_motion, X_o=est.X_o[pts].copy()))

@@ -153,6 +153,68 @@ def motion_factor(
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3 * n), all_keys, error)
 
 
+_MOMENT_BASIS = np.vstack([np.zeros(3), np.eye(3)])  # x = 0, e_1, e_2, e_3: the columns of [A c] (motion_factor_moments)
+
+
+def motion_factor_moments(
+    keys: list[int],
+    parametrization: str,
+    dt: float,
+    sigma: float,
+    huber_delta2: float | None,
+    X_o: np.ndarray,
+) -> gtsam.CustomFactor:
+    """Eq. (4) of one object between its observations a and b for constant points `X_o`, in 12 rows
+    instead of 3 per point, with exactly the normal equations and the Huber cost of `motion_factor`.
+
+    Each point's residual is affine in the point, e_j = A x_j + c = M (x_j; 1) with M = [A c] (3x4,
+    from `motion_residuals` at x = 0, e_1, e_2, e_3), so with the per-point Huber weights w_j (1
+    without kernel) and S = sum_j w_j (x_j; 1)(x_j; 1)^T = L L^T (4x4), the 12-vector vec(M L) / sigma
+    and its Jacobian give sum_j w_j J_j^T J_j, sum_j w_j J_j^T e_j and sum_j w_j |e_j|^2 exactly
+    (Gauss-Newton system of the stacked form, linearization at one point). The error evaluation (no
+    Jacobians: LM's trial steps) returns a vector whose half squared norm is the summed Huber cost of
+    the points, as the stacked factor's. Keys as `motion_factor`.
+    """
+    via_camera = parametrization == "camera_in_object"
+    n_pose = 4 if via_camera else 2
+    X_h = np.hstack([X_o, np.ones((len(X_o), 1))])
+
+    def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+        poses = [values.atPose3(k).matrix() for k in keys[:n_pose]]
+        if via_camera:
+            T_w_c_a, T_w_c_b, Q_a, Q_b = poses
+            T_w_o_a, T_w_o_b = _compose_inverse(T_w_c_a, Q_a), _compose_inverse(T_w_c_b, Q_b)
+        else:
+            T_w_o_a, T_w_o_b = poses
+        out = motion_residuals(T_w_o_a, T_w_o_b, values.atVector(keys[n_pose]), dt, _MOMENT_BASIS, H is not None)
+        M = np.column_stack([(out[0][1:] - out[0][0]).T, out[0][0]]) / sigma  # whitened [A c]
+        e = X_h @ M.T
+        c2 = np.einsum("ij,ij->i", e, e)
+        if H is None:
+            cost2 = c2.sum() if huber_delta2 is None else 2.0 * huber_cost(c2, huber_delta2).sum()
+            r = np.zeros(12)
+            r[0] = np.sqrt(cost2)
+            return r
+        w = huber_scale(c2, huber_delta2, True) ** 2
+        lam, U = np.linalg.eigh((X_h * w[:, None]).T @ X_h)
+        L = U * np.sqrt(np.maximum(lam, 0.0))
+        blocks = []
+        for J in out[1:4]:  # J_a, J_b, J_vel: (4 basis points x 3, 6)
+            G = J.reshape(4, 3, 6) / sigma
+            G = np.concatenate([G[1:] - G[0], G[:1]])  # d column l of M
+            blocks.append(np.einsum("lk,lij->kij", L, G).reshape(12, 6))
+        J_a, J_b, J_vel = blocks
+        if via_camera:
+            J_a, J_b = J_a @ adjoint(Q_a), J_b @ adjoint(Q_b)
+            H[0], H[1], H[2], H[3] = J_a, J_b, -J_a, -J_b
+        else:
+            H[0], H[1] = J_a, J_b
+        H[n_pose] = J_vel
+        return (M @ L).T.ravel()
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(12), list(keys), error)
+
+
 def direct_projection_factor(
     camera_key: int,
     object_key: int,
