@@ -307,10 +307,15 @@ class ObjectsConfig:
     ransac_inlier_m: float = 0.3
     # Track ids: a new object whose matched keypoints are >= join_ratio (and >= min_join_matches)
     # points of one map object joins its track; else an instance whose box has IoU >= join_iou with
-    # an object seen in the previous frame joins that track (instance-to-instance association).
+    # the motion-compensated box of an object measured within join_max_gap_s joins that track
+    # (instance-to-instance association; its pose is then the constant-velocity prediction).
     join_ratio: float = 0.5
     min_join_matches: int = 6
     join_iou: float = 0.3
+    join_max_gap_s: float = 0.1
+    # An instance with fewer than min_inliers close keypoints keeps (by box IoU) a track measured
+    # within coast_max_s at its constant-velocity prediction, without new points (0: never).
+    coast_max_s: float = 0.0
     # Tracks unseen for longer than this are no longer matched (occlusions up to it keep the id).
     max_lost_s: float = 2.0
     # Velocity known (prediction (a) used) only if the last two observations are this close in time.
@@ -327,6 +332,10 @@ class ObjectsConfig:
     cull_found_ratio: float = 0.25
     # Bundle adjustment with objects on keyframes (III-D); False: object poses from tracking only.
     ba: bool = True
+    # Not in the paper: between BAs, each inlier stereo observation of an object point is averaged
+    # into its position in the object frame, weighted by its depth information (1 px disparity at its
+    # level), so that points created far away take the depth of closer views.
+    fuse_points: bool = False
     # Not in the paper: a constant-velocity Kalman filter of each object-frame origin between BAs
     # (white acceleration accel_sigma m/s^2; pose-only position covariance from its stereo Jacobian,
     # 1 px at level 0, plus position_floor_m; unknown initial speed initial_speed_sigma m/s).
@@ -343,10 +352,12 @@ class ObjectsConfig:
         if self.min_inliers < 3:
             raise ConfigError(f"objects.min_inliers: expected >= 3, got {self.min_inliers}")
         for name in ("max_point_depth_m", "max_point_spread_m", "projection_radius", "max_speed_mps",
-                     "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s", "accel_sigma", "position_floor_m",
-                     "initial_speed_sigma"):
+                     "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s", "join_max_gap_s", "accel_sigma",
+                     "position_floor_m", "initial_speed_sigma"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
+        if self.coast_max_s < 0:
+            raise ConfigError(f"objects.coast_max_s: expected >= 0, got {self.coast_max_s}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",
                      "projection_nn_ratio", "weak_tracked_ratio"):
             if not 0.0 <= getattr(self, name) <= 1.0:

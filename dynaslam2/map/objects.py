@@ -19,7 +19,8 @@ class ObjectPoints(ColumnStore):
     """Object points as contiguous arrays (struct of arrays), indexed by a point id.
 
     X_o: position in the frame of object `track`; desc: ORB descriptor (the latest inlier observation);
-    n_visible / n_found: projected in view / matched as an inlier (culling); alive: not culled.
+    n_visible / n_found: projected in view / matched as an inlier (culling); alive: not culled;
+    weight: summed depth information (1/m^2) of the stereo observations averaged into X_o.
     """
 
     COLUMNS = (
@@ -29,14 +30,16 @@ class ObjectPoints(ColumnStore):
         ("n_visible", (), np.int64, 0),
         ("n_found", (), np.int64, 0),
         ("alive", (), bool, False),
+        ("weight", (), np.float64, 0.0),
     )
 
     def __init__(self, capacity: int = 1024) -> None:
         super().__init__(capacity)
 
-    def add(self, track_id: int, X_o: np.ndarray, desc: np.ndarray) -> np.ndarray:
-        """Append points of object `track_id`; returns their ids."""
+    def add(self, track_id: int, X_o: np.ndarray, desc: np.ndarray, weight: np.ndarray | float = 0.0) -> np.ndarray:
+        """Append points of object `track_id` (depth information `weight`); returns their ids."""
         ids = self._append(len(X_o))
+        self.weight[ids] = weight
         self.X_o[ids] = X_o
         self.desc[ids] = desc
         self.track[ids] = track_id
@@ -77,6 +80,7 @@ class ObjectObservation:
     box2d: tuple[float, float, float, float] | None = None
     kf_id: int = -1
     origin_uv: np.ndarray | None = None  # (2,) image position of the object-frame origin, or None behind
+    measured: bool = True  # False: T_w_o is the constant-velocity prediction (instance association only)
 
     @property
     def n_points(self) -> int:
@@ -103,6 +107,10 @@ class ObjectTrack:
     def last(self) -> ObjectObservation:
         return self.observations[-1]
 
+    def last_measured_timestamp(self) -> float:
+        """Time of the newest observation whose pose was measured (not predicted); -inf if none."""
+        return next((o.timestamp for o in reversed(self.observations) if o.measured), -np.inf)
+
     def at_frame(self, frame_index: int) -> ObjectObservation | None:
         """The observation at `frame_index` (searched from the newest), or None."""
         for obs in reversed(self.observations):
@@ -127,8 +135,9 @@ class ObjectMap:
         self.next_track_id += 1
         return track
 
-    def add_points(self, track_id: int, X_o: np.ndarray, desc: np.ndarray) -> np.ndarray:
-        return self.points.add(track_id, X_o, desc)
+    def add_points(self, track_id: int, X_o: np.ndarray, desc: np.ndarray,
+                   weight: np.ndarray | float = 0.0) -> np.ndarray:
+        return self.points.add(track_id, X_o, desc, weight)
 
     def parameter_counts(self, n_cameras: int) -> dict[str, int]:
         """Parameters of the stored representation (paper III-C): 6 per camera pose, 6 per stored

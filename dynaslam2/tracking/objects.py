@@ -145,6 +145,30 @@ class ObjectTracker:
         d = frame.depth[kp]
         return kp[(d > 0) & (d <= self.cfg.max_point_depth_m)]
 
+    def _depth_weight(self, frame: Frame, kp: np.ndarray) -> np.ndarray:
+        """(K,) depth information 1/sigma_z^2 (1/m^2) of the stereo keypoints `kp`: disparity sigma of
+        one pixel at the keypoint's level, sigma_z = z^2 sigma_d / bf; 0 without depth."""
+        z = frame.depth[kp]
+        zs = np.where(z > 0, z, 1.0)
+        return np.where(z > 0, (self.camera.bf / zs**2) ** 2 * self.inv_level_sigma2[frame.keypoints.octave[kp]], 0.0)
+
+    def _fuse_points(self, frame: Frame, objects: ObjectMap, T_w_o: np.ndarray, kp: np.ndarray, pts: np.ndarray) -> None:
+        """Average the stereo observations of inlier keypoints `kp` (measured object pose `T_w_o`)
+        into their object points `pts`, weighted by depth information, so points first seen far away
+        settle where close observations put them (objects.fuse_points; BA refines them on keyframes)."""
+        if not self.cfg.fuse_points:
+            return
+        close = (frame.depth[kp] > 0) & (frame.depth[kp] <= self.cfg.max_point_depth_m)
+        kp, pts = kp[close], pts[close]
+        if len(kp) == 0:
+            return
+        T_o_w = inverse(T_w_o)
+        X_o = self._world_points(frame, kp) @ T_o_w[:3, :3].T + T_o_w[:3, 3]
+        P = objects.points
+        w_old, w_new = P.weight[pts], self._depth_weight(frame, kp)
+        P.X_o[pts] = (w_old[:, None] * P.X_o[pts] + w_new[:, None] * X_o) / (w_old + w_new)[:, None]
+        P.weight[pts] = w_old + w_new
+
     def _compact(self, X: np.ndarray) -> np.ndarray:
         """Mask of points within max_point_spread_m of their median (drops mask-border background)."""
         if len(X) == 0:
@@ -216,6 +240,7 @@ class ObjectTracker:
             if int(inst_ids[inst]) in claimed:
                 continue
             claimed.add(int(inst_ids[inst]))
+            self._fuse_points(frame, objects, T_w_o, kp[inl], pts[inl])
             self._observe(frame, objects, tr, T_w_o, kp[inl], pts[inl], int(inst_ids[inst]), boxes[inst])
             free[kp[inl]] = False
             seen.append(tid)
@@ -317,7 +342,7 @@ class ObjectTracker:
         track.observations.append(ObjectObservation(
             frame_index=frame.index, timestamp=frame.timestamp, T_w_o=T_w_o, v_o=v_o, w_o=w_o,
             instance_id=instance_id, kp_idx=kp.astype(np.int64), pt_ids=pts.astype(np.int64), box2d=box2d,
-            origin_uv=self._origin_uv(frame, T_w_o)))
+            origin_uv=self._origin_uv(frame, T_w_o), measured=measured))
         track.velocity_known = known
         P = objects.points
         P.desc[pts] = frame.keypoints.desc[kp]
@@ -370,60 +395,87 @@ class ObjectTracker:
 
     def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                     inst: int, box: np.ndarray, boxes: np.ndarray, free: np.ndarray) -> int | None:
-        """An unclaimed instance: joins an unseen track (point votes, then box IoU with the previous
-        frame; >= min_inliers close keypoints) or, with >= min_new_points close keypoints, creates an
-        object at the centroid of its points with identity rotation (III-B)."""
+        """An unclaimed instance: joins an unseen track (point votes with >= min_inliers close
+        keypoints, then box IoU with a track measured within join_max_gap_s, or within coast_max_s
+        when the instance has fewer close keypoints: no points then) or, with >=
+        min_new_points close keypoints, creates an object at the centroid of its points with identity
+        rotation (III-B)."""
         cfg = self.cfg
         kp = self._close(frame, np.flatnonzero(free & (frame.instance_id == inst)))
         X_w = self._world_points(frame, kp)
         ok = self._compact(X_w)
         kp, X_w = kp[ok], X_w[ok]
-        if len(kp) < cfg.min_inliers:
-            return None
+        enough = len(kp) >= cfg.min_inliers
         # Track ids from point votes: most matched keypoints belong to one map object.
-        if unseen:
-            ids = np.array([tr.track_id for tr in unseen])
-            pts = objects.points.of_tracks(ids)
-            m = match_descriptors(objects.points.desc[pts], frame.keypoints.desc[kp], cfg.bf_max_distance,
-                                  cfg.bf_nn_ratio)
-            if len(m):
-                owner = objects.points.track[pts[m[:, 0]]]
-                votes_id, votes = np.unique(owner, return_counts=True)
-                b = int(np.argmax(votes))
-                if votes[b] >= cfg.min_join_matches and votes[b] >= cfg.join_ratio * len(m):
-                    tid = int(votes_id[b])
-                    sel = owner == tid
-                    tr = objects.tracks[tid]
-                    est = self.estimate_pose(frame, objects, tr, pred[tid], kp[m[sel, 1]], pts[m[sel, 0]], True)
-                    if est is not None:
-                        T_w_o, inl = est
-                        kp_in, pt_in = kp[m[sel, 1]][inl], pts[m[sel, 0]][inl]
-                        rest = ~np.isin(kp, kp_in)
-                        new = objects.add_points(tid, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
-                                                 frame.keypoints.desc[kp[rest]])
-                        self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box)
-                        free[kp] = False
-                        return tid
-        # Instance-to-instance: box IoU with an object seen in the previous frame.
-        prev = [tr for tr in unseen if tr.last.frame_index == frame.index - 1 and tr.last.box2d is not None]
-        if prev:
-            iou = box_iou(np.array([box]), np.array([self.predicted_box(tr, frame, pred[tr.track_id]) for tr in prev]))[0]
-            b = int(np.argmax(iou))
-            if iou[b] >= cfg.join_iou:
-                tr = prev[b]
-                T_w_o = pred[tr.track_id]
-                new = objects.add_points(tr.track_id, (X_w - T_w_o[:3, 3]) @ T_w_o[:3, :3], frame.keypoints.desc[kp])
-                self._observe(frame, objects, tr, T_w_o, kp, new, inst, box, measured=False)
-                free[kp] = False
-                return tr.track_id
+        if unseen and enough:
+            tid = self._join_by_points(frame, objects, unseen, pred, inst, box, kp, X_w, free)
+            if tid is not None:
+                return tid
+        # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
+        # goes on at its constant-velocity prediction; the instance's close keypoints become its points.
+        tr = self._join_by_box(frame, unseen, pred, box, cfg.join_max_gap_s if enough else cfg.coast_max_s)
+        if tr is not None:
+            T_w_o = pred[tr.track_id]
+            if not enough:
+                kp, X_w = kp[:0], X_w[:0]
+            new = objects.add_points(tr.track_id, (X_w - T_w_o[:3, 3]) @ T_w_o[:3, :3], frame.keypoints.desc[kp],
+                                     self._depth_weight(frame, kp))
+            self._observe(frame, objects, tr, T_w_o, kp, new, inst, box, measured=False)
+            free[kp] = False
+            return tr.track_id
         if len(kp) < cfg.min_new_points:
             return None
         tr = objects.new_track(CLASS_NAMES[int(inst) // 1000])
         centroid = X_w.mean(axis=0)
-        new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp])
+        new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
         self._observe(frame, objects, tr, make_pose(np.eye(3), centroid), kp, new, inst, box)
         free[kp] = False
         return tr.track_id
+
+    def _join_by_points(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
+                        inst: int, box: np.ndarray, kp: np.ndarray, X_w: np.ndarray, free: np.ndarray) -> int | None:
+        """The instance's close keypoints `kp` (world points `X_w`) mostly match the points of one
+        unseen map object: its pose from those matches, the other keypoints become its points."""
+        cfg = self.cfg
+        ids = np.array([tr.track_id for tr in unseen])
+        pts = objects.points.of_tracks(ids)
+        m = match_descriptors(objects.points.desc[pts], frame.keypoints.desc[kp], cfg.bf_max_distance,
+                              cfg.bf_nn_ratio)
+        if not len(m):
+            return None
+        owner = objects.points.track[pts[m[:, 0]]]
+        votes_id, votes = np.unique(owner, return_counts=True)
+        b = int(np.argmax(votes))
+        if votes[b] < cfg.min_join_matches or votes[b] < cfg.join_ratio * len(m):
+            return None
+        tid = int(votes_id[b])
+        sel = owner == tid
+        tr = objects.tracks[tid]
+        est = self.estimate_pose(frame, objects, tr, pred[tid], kp[m[sel, 1]], pts[m[sel, 0]], True)
+        if est is None:
+            return None
+        T_w_o, inl = est
+        kp_in, pt_in = kp[m[sel, 1]][inl], pts[m[sel, 0]][inl]
+        self._fuse_points(frame, objects, T_w_o, kp_in, pt_in)
+        rest = ~np.isin(kp, kp_in)
+        new = objects.add_points(tid, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3], frame.keypoints.desc[kp[rest]],
+                                 self._depth_weight(frame, kp[rest]))
+        self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box)
+        free[kp] = False
+        return tid
+
+    def _join_by_box(self, frame: Frame, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
+                     box: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
+        """The unseen track measured within `max_gap_s` whose motion-compensated box overlaps `box`
+        most, if its IoU is >= join_iou (instance-to-instance association, III-B)."""
+        cfg = self.cfg
+        recent = [tr for tr in unseen if tr.last.box2d is not None
+                  and frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
+        if not recent or not np.all(np.isfinite(box)):
+            return None
+        iou = box_iou(np.array([box]), np.array([self.predicted_box(tr, frame, pred[tr.track_id]) for tr in recent]))[0]
+        b = int(np.argmax(iou))
+        return recent[b] if iou[b] >= cfg.join_iou else None
 
     def _cull(self, objects: ObjectMap, track_ids: list[int]) -> None:
         """Drop object points of the tracked objects that are rarely found where they project."""
@@ -483,7 +535,7 @@ class ObjectTracker:
             if len(old):
                 ok = np.linalg.norm(X_o - np.median(old, axis=0), axis=1) <= self.cfg.max_point_spread_m
                 kp, X_o = kp[ok], X_o[ok]
-            new = objects.add_points(tr.track_id, X_o, frame.keypoints.desc[kp])
+            new = objects.add_points(tr.track_id, X_o, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
             obs.kp_idx = np.r_[obs.kp_idx, kp]
             obs.pt_ids = np.r_[obs.pt_ids, new]
             free[kp] = False
