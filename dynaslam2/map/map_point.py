@@ -10,9 +10,6 @@ import numpy as np
 
 from dynaslam2.map.columns import ColumnStore
 
-_POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.uint8)
-
-
 class MapPoints(ColumnStore):
     """Arrays of map-point attributes (ORB-SLAM2's MapPoint, vectorized).
 
@@ -73,8 +70,11 @@ class MapPoints(ColumnStore):
 
 
 def descriptor_distances(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Hamming distances between broadcastable (..., 32) uint8 descriptor arrays -> (...) int."""
-    return _POPCOUNT[np.bitwise_xor(A, B)].sum(-1, dtype=np.int32)
+    """Hamming distances between broadcastable (..., 32) uint8 descriptor arrays -> (...) int32
+    (xor and popcount on 64-bit words)."""
+    words_a = np.ascontiguousarray(A, dtype=np.uint8).view(np.uint64)
+    words_b = np.ascontiguousarray(B, dtype=np.uint8).view(np.uint64)
+    return np.bitwise_count(np.bitwise_xor(words_a, words_b)).sum(-1, dtype=np.int32)
 
 
 def distinctive_descriptors(group: np.ndarray, desc: np.ndarray, n_groups: int) -> np.ndarray:
