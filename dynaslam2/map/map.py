@@ -182,16 +182,17 @@ class Map:
         grp = local[self.obs.pt[rows]]
         kf_of_row = self.obs.kf[rows]
         kp_of_row = self.obs.kp[rows]
-        kf_ids = np.unique(kf_of_row)
         desc = np.empty((len(rows), 32), dtype=np.uint8)
         centers = np.empty((len(rows), 3))
         octave = np.empty(len(rows), dtype=np.int64)
-        for k in kf_ids:
-            kf = self.keyframes[int(k)]
-            m = kf_of_row == k
-            desc[m] = kf.keypoints.desc[kp_of_row[m]]
-            octave[m] = kf.keypoints.octave[kp_of_row[m]]
-            centers[m] = kf.center_w
+        by_kf = np.argsort(kf_of_row, kind="stable")  # the rows of each keyframe: one slice of by_kf
+        bounds = np.flatnonzero(np.r_[True, kf_of_row[by_kf][1:] != kf_of_row[by_kf][:-1], True])
+        for start, end in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+            r = by_kf[start:end]
+            kf = self.keyframes[int(kf_of_row[r[0]])]
+            desc[r] = kf.keypoints.desc[kp_of_row[r]]
+            octave[r] = kf.keypoints.octave[kp_of_row[r]]
+            centers[r] = kf.center_w
         has_obs = np.bincount(grp, minlength=len(pt_ids)) > 0
         rep = distinctive_descriptors(grp, desc, len(pt_ids))
         self.points.desc[pt_ids[has_obs]] = rep[has_obs]
@@ -248,9 +249,11 @@ class Map:
         """Unique living point ids seen by the given keyframes."""
         if not kf_ids:
             return np.zeros(0, dtype=np.int64)
-        pts = np.concatenate([self.keyframes[k].point_ids for k in kf_ids])
-        pts = np.unique(pts[pts >= 0])
-        return pts[self.points.alive[pts]]
+        seen = np.zeros(self.points.size, dtype=bool)  # a mark per point id: no sort of the concatenation
+        for k in kf_ids:
+            ids = self.keyframes[k].point_ids
+            seen[ids[ids >= 0]] = True
+        return np.flatnonzero(seen & self.points.alive[: self.points.size])
 
     def observers(self, pt_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(kf, pt, kp) of all valid observations of the points."""

@@ -287,7 +287,9 @@ class LocalMapper:
         P = map_.points
         pts = P.resolve(pt_ids)
         pts = np.unique(pts[pts >= 0])
-        pts = pts[~np.isin(pts, kf.point_ids)]
+        in_kf = np.zeros(P.size, dtype=bool)
+        in_kf[kf.point_ids[kf.point_ids >= 0]] = True
+        pts = pts[~in_kf[pts]]
         if len(pts) == 0:
             return
         cam = self.camera
