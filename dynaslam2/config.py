@@ -203,9 +203,9 @@ class ObjectOptimConfig:
     # object's points per frame pair) or held at their estimate at the start of each LM stage (eq. 2
     # refines them; measured faster, see benchmarks/bench_object_ba.py).
     motion_points_variable: bool = False
-    # eq. (4) with constant points: "moments" = one 12-row factor per object per frame pair with exactly the
-    # normal equations and Huber cost of "stacked" (3 rows per point, the reference form); see
-    # object_factors.motion_factor_moments
+    # eq. (4) with constant points: "moments" = one factor per object, 12 rows per frame pair, with exactly the
+    # normal equations and Huber cost of "stacked" (a factor per frame pair, 3 rows per point: the reference
+    # form); see object_factors.motion_factor_object
     motion_form: Literal["moments", "stacked"] = "moments"
     min_observation_points: int = 5  # an object observation with fewer used point observations keeps its pose
     tail_seconds: float = 2.0  # object-weak BA (III-D): keyframes within this time of the newest are free

@@ -18,7 +18,7 @@ from dynaslam2.optim.object_ba import object_bundle_adjustment, temporal_tail
 from dynaslam2.optim.object_factors import (
     direct_projection_factor,
     motion_factor,
-    motion_factor_moments,
+    motion_factor_object,
     motion_residuals,
 )
 from dynaslam2.optim.object_pose import (
@@ -123,28 +123,46 @@ def test_motion_factor_huber_weights():
 
 @pytest.mark.parametrize("parametrization", ["camera_in_object", "direct"])
 @pytest.mark.parametrize("delta2", [None, 7.815])
-def test_motion_factor_moments_has_the_stacked_normal_equations(parametrization, delta2):
-    """Eq. (4) in 12 rows (moments of the constant points): the linearization gives exactly the
-    stacked factor's A^T A, A^T b and b^T b (Huber weights included), and the same Huber cost."""
+def test_object_motion_factor_has_the_stacked_normal_equations(parametrization, delta2):
+    """Eq. (4) of one object over three frame pairs sharing keys, in one factor of 12 rows per pair
+    (moments of the constant points): the linearization gives exactly the Hessian, gradient and
+    b^T b of the stacked per-pair factors (3 rows per point, Huber weights included), and the same
+    Huber cost."""
     rng = np.random.default_rng(2)
-    values, X_o = motion_values(rng, 40)
-    keys = [0, 1, 2, 3, 4] if parametrization == "camera_in_object" else [0, 1, 4]
-    stacked = motion_factor(keys, parametrization, 0.2, 0.01, delta2, X_o=X_o)
-    moments = motion_factor_moments(keys, parametrization, 0.2, 0.01, delta2, X_o)
-    A, b = stacked.linearize(values).jacobian()
-    A_m, b_m = moments.linearize(values).jacobian()
-    assert A_m.shape == (12, A.shape[1])
-    assert np.abs(A_m.T @ A_m - A.T @ A).max() < 1e-12 * np.abs(A.T @ A).max()
-    assert np.abs(A_m.T @ b_m - A.T @ b).max() < 1e-12 * np.abs(A.T @ b).max()
-    assert np.isclose(b_m @ b_m, b @ b, rtol=1e-12)
+    values = gtsam.Values()
+    for key in range(7):
+        values.insert(key, gtsam.Pose3(se3_exp(rng.normal(0, 0.7, 6))))
+    for key in range(10, 13):
+        values.insert(key, np.array([0.5, -0.2, 7.0, 0.05, 0.3, -0.1]) + rng.normal(0, 0.5, 6))
+    X_o = box_points(rng, 40, (1.8, 1.5, 4.5))
+    if parametrization == "camera_in_object":  # cameras 0-2 (and 6), Q 3-5, velocities 10-12
+        pair_keys = np.array([[0, 1, 3, 4, 10], [1, 2, 4, 5, 11], [2, 6, 5, 3, 12]])
+    else:
+        pair_keys = np.array([[0, 1, 10], [1, 2, 11], [2, 3, 12]])
+    dt = np.array([0.2, 0.3, 0.15])
+    sigma = 0.05 * dt
+    stacked = gtsam.NonlinearFactorGraph()
+    for k, t, s in zip(pair_keys.tolist(), dt.tolist(), sigma.tolist()):
+        stacked.push_back(motion_factor(k, parametrization, t, s, delta2, X_o=X_o))
+    factor = motion_factor_object(pair_keys, parametrization, dt, sigma, delta2, X_o)
+    ordering = gtsam.Ordering(sorted(set(pair_keys.ravel().tolist())))
+    linear = gtsam.GaussianFactorGraph()
+    linear.push_back(factor.linearize(values))
+    H = linear.augmentedHessian(ordering)  # [A^T A, A^T b; b^T A, b^T b]
+    H_s = stacked.linearize(values).augmentedHessian(ordering)
+    assert np.abs(H[:-1, :-1] - H_s[:-1, :-1]).max() < 1e-12 * np.abs(H_s[:-1, :-1]).max()
+    assert np.abs(H[:-1, -1] - H_s[:-1, -1]).max() < 1e-12 * np.abs(H_s[:-1, -1]).max()
+    assert np.isclose(H[-1, -1], H_s[-1, -1], rtol=1e-12)
     if delta2 is not None:
-        e = motion_factor(keys, parametrization, 0.2, 0.01, None, X_o=X_o).unwhitenedError(values).reshape(-1, 3)
+        e = np.concatenate([motion_factor(k, parametrization, t, s, None, X_o=X_o).unwhitenedError(values)
+                            for k, t, s in zip(pair_keys.tolist(), dt.tolist(), sigma.tolist())]).reshape(-1, 3)
         assert (np.einsum("ij,ij->i", e, e) > delta2).sum() >= 3  # the kernel is active on some points
-    assert np.isclose(moments.error(values), stacked.error(values), rtol=1e-12)
+    assert np.isclose(factor.error(values), stacked.error(values), rtol=1e-12)
 
 
 def test_moments_and_stacked_motion_terms_reach_the_same_optimum():
-    """The whole BA with eq. (4) in 12 rows per frame pair or 3 rows per point: same result."""
+    """The whole BA with eq. (4) as one factor per object (12 rows per frame pair) or one per frame pair
+    (3 rows per point): same result."""
     w = window(4, n_keyframes=5, n_static=200, n_object_points=25)
     cfg = OptimConfig(ba_relative_error_tol=0.0, ba_iterations_robust=10, ba_iterations_refine=15)
     stacked_cfg = dataclasses.replace(cfg, objects=ObjectOptimConfig(motion_form="stacked"))

@@ -67,7 +67,7 @@ from dynaslam2.optim.local_ba import FIXED_POSE_SIGMA, BAProblem, local_bundle_a
 from dynaslam2.optim.object_factors import (
     direct_projection_factor,
     motion_factor,
-    motion_factor_moments,
+    motion_factor_object,
     motion_residuals,
 )
 from dynaslam2.optim.pose_only import pose_only_factor
@@ -335,25 +335,27 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
             graph.addPriorPose3(int(obs_key[f]), values.atPose3(int(obs_key[f])), prior)
     # eq. (3) and eq. (4)-(5), per object per consecutive pair of observations
     huber_velocity = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(ocfg.chi2_velocity))
+    motion_keys = np.column_stack([obs_key[st.pair_a], obs_key[st.pair_b], vel_key[st.pair_a]]) if direct else \
+        np.column_stack([cam_key[problem.obj_frames[st.pair_a]], cam_key[problem.obj_frames[st.pair_b]],
+                         obs_key[st.pair_a], obs_key[st.pair_b], vel_key[st.pair_a]])
     for a, b, dt in zip(st.pair_a.tolist(), st.pair_b.tolist(), st.pair_dt.tolist()):
         sigmas = np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3)
         model = gtsam.noiseModel.Robust.Create(huber_velocity, gtsam.noiseModel.Diagonal.Sigmas(sigmas))
         graph.push_back(gtsam.BetweenFactorVector(int(vel_key[a]), int(vel_key[b]), np.zeros(6), model))
-        pts = obj_pts[problem.pt_obj[obj_pts] == problem.obj_id[a]]
-        if direct:
-            motion_keys = [int(obs_key[a]), int(obs_key[b]), int(vel_key[a])]
-        else:
-            motion_keys = [int(cam_key[problem.obj_frames[a]]), int(cam_key[problem.obj_frames[b]]),
-                           int(obs_key[a]), int(obs_key[b]), int(vel_key[a])]
-        if ocfg.motion_points_variable:
-            graph.push_back(motion_factor(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
-                                          ocfg.chi2_motion, point_keys=opt_key[pts]))
-        elif ocfg.motion_form == "moments":
-            graph.push_back(motion_factor_moments(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
-                                                  ocfg.chi2_motion, est.X_o[pts].copy()))
-        else:
-            graph.push_back(motion_factor(motion_keys, ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
-                                          ocfg.chi2_motion, X_o=est.X_o[pts].copy()))
+    pair_obj = problem.obj_id[st.pair_a]
+    for k in np.unique(pair_obj).tolist():
+        pts = obj_pts[problem.pt_obj[obj_pts] == k]
+        mine = np.flatnonzero(pair_obj == k)
+        if ocfg.motion_form == "moments" and not ocfg.motion_points_variable:
+            graph.push_back(motion_factor_object(motion_keys[mine], ocfg.parametrization, st.pair_dt[mine],
+                                                 ocfg.sigma_motion_xyz * st.pair_dt[mine], ocfg.chi2_motion,
+                                                 est.X_o[pts].copy()))
+            continue
+        for r in mine.tolist():
+            dt = float(st.pair_dt[r])
+            graph.push_back(motion_factor(motion_keys[r].tolist(), ocfg.parametrization, dt, ocfg.sigma_motion_xyz * dt,
+                                          ocfg.chi2_motion, **({"point_keys": opt_key[pts]} if ocfg.motion_points_variable
+                                                               else {"X_o": est.X_o[pts].copy()})))
     keys = {"camera": (cams, cam_keys, 6), "object_pose": (obs_idx, obs_keys, 6),
             "static_point": (static_pts, spt_keys, 3), "object_point": (obj_pts, opt_keys, 3),
             "velocity": (moving_idx, vel_keys, 6)}

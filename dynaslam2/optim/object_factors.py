@@ -18,7 +18,7 @@ import gtsam
 import numpy as np
 
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import hat
+from dynaslam2.geometry.se3 import hat, so3_exp
 from dynaslam2.optim.reprojection import huber_cost
 
 
@@ -153,66 +153,109 @@ def motion_factor(
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3 * n), all_keys, error)
 
 
-_MOMENT_BASIS = np.vstack([np.zeros(3), np.eye(3)])  # x = 0, e_1, e_2, e_3: the columns of [A c] (motion_factor_moments)
+def so3_right_jacobian(w: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) right Jacobian of SO(3) at (..., 3) rotation vectors: Exp(w + d) ~ Exp(w) Exp(J_r d)
+    (gtsam's Rot3.ExpmapDerivative), vectorized."""
+    theta = np.linalg.norm(w, axis=-1)[..., None, None]
+    K = hat(w)
+    small = theta < 1e-4
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
+    return np.eye(3) - a * K + b * (K @ K)
 
 
-def motion_factor_moments(
-    keys: list[int],
+def _adjoints(T: np.ndarray) -> np.ndarray:
+    """(R, 6, 6) adjoints of (R, 4, 4) poses in gtsam's tangent order (omega, nu), as `adjoint`."""
+    Ad = np.zeros((len(T), 6, 6))
+    Ad[:, :3, :3] = Ad[:, 3:, 3:] = T[:, :3, :3]
+    Ad[:, 3:, :3] = hat(T[:, :3, 3]) @ T[:, :3, :3]
+    return Ad
+
+
+def motion_factor_object(
+    pair_keys: np.ndarray,
     parametrization: str,
-    dt: float,
-    sigma: float,
+    dt: np.ndarray,
+    sigma: np.ndarray,
     huber_delta2: float | None,
     X_o: np.ndarray,
 ) -> gtsam.CustomFactor:
-    """Eq. (4) of one object between its observations a and b for constant points `X_o`, in 12 rows
-    instead of 3 per point, with exactly the normal equations and the Huber cost of `motion_factor`.
+    """Eq. (4) of one object over all its frame pairs for its constant points `X_o`: one factor, 12 rows
+    per pair instead of 3 per point, with exactly the normal equations and the Huber cost of the
+    stacked `motion_factor`s of the pairs. `pair_keys`: (R, 5) or (R, 3) keys of each pair as
+    `motion_factor`; `dt`, `sigma`: (R,).
 
-    Each point's residual is affine in the point, e_j = A x_j + c = M (x_j; 1) with M = [A c] (3x4,
-    from `motion_residuals` at x = 0, e_1, e_2, e_3), so with the per-point Huber weights w_j (1
-    without kernel) and S = sum_j w_j (x_j; 1)(x_j; 1)^T = L L^T (4x4), the 12-vector vec(M L) / sigma
-    and its Jacobian give sum_j w_j J_j^T J_j, sum_j w_j J_j^T e_j and sum_j w_j |e_j|^2 exactly
-    (Gauss-Newton system of the stacked form, linearization at one point). The error evaluation (no
-    Jacobians: LM's trial steps) returns a vector whose half squared norm is the summed Huber cost of
-    the points, as the stacked factor's. Keys as `motion_factor`.
+    Each point's residual is affine in the point, e_j = A x_j + c = M (x_j; 1) with M = [A c] (3x4),
+    so with the per-point Huber weights w_j (1 without kernel) and S = sum_j w_j (x_j; 1)(x_j; 1)^T =
+    L L^T (4x4), the 12-vector vec(M L) / sigma and its Jacobian give sum_j w_j J_j^T J_j,
+    sum_j w_j J_j^T e_j and sum_j w_j |e_j|^2 exactly (the Gauss-Newton system of the stacked form).
+    The error evaluation (no Jacobians: LM's trial steps) returns a vector whose half squared norm is
+    the summed Huber cost of the points. Vectorized over the pairs: one Python call per object.
     """
     via_camera = parametrization == "camera_in_object"
     n_pose = 4 if via_camera else 2
+    pair_keys = np.asarray(pair_keys, dtype=np.int64).reshape(-1, n_pose + 1)
+    dt, sigma = np.asarray(dt, dtype=float), np.asarray(sigma, dtype=float)
+    R = len(pair_keys)
+    keys, role = np.unique(pair_keys, return_inverse=True)
+    role = role.reshape(R, n_pose + 1)
+    is_pose = np.zeros(len(keys), dtype=bool)
+    is_pose[role[:, :n_pose]] = True
+    pose_keys, vel_keys = keys[is_pose].tolist(), keys[~is_pose].tolist()
+    slot = np.cumsum(is_pose) - 1  # index of a pose key among the poses
+    vslot = np.cumsum(~is_pose) - 1  # index of a velocity key among the velocities
+    pose_role, vel_role = slot[role[:, :n_pose]], vslot[role[:, n_pose]]
     X_h = np.hstack([X_o, np.ones((len(X_o), 1))])
+    pairs = np.arange(R)
 
     def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
-        poses = [values.atPose3(k).matrix() for k in keys[:n_pose]]
-        if via_camera:
-            T_w_c_a, T_w_c_b, Q_a, Q_b = poses
-            T_w_o_a, T_w_o_b = _compose_inverse(T_w_c_a, Q_a), _compose_inverse(T_w_c_b, Q_b)
+        T = np.array([values.atPose3(k).matrix() for k in pose_keys])[pose_role]  # (R, n_pose, 4, 4)
+        velocity = np.array([values.atVector(k) for k in vel_keys])[vel_role]
+        if via_camera:  # T_w_o = T_w_c Q^-1
+            Q = T[:, 2:]
+            R_wo = T[:, :2, :3, :3] @ np.swapaxes(Q[..., :3, :3], -1, -2)
+            t_wo = T[:, :2, :3, 3] - np.einsum("rpij,rpj->rpi", R_wo, Q[..., :3, 3])
         else:
-            T_w_o_a, T_w_o_b = poses
-        out = motion_residuals(T_w_o_a, T_w_o_b, values.atVector(keys[n_pose]), dt, _MOMENT_BASIS, H is not None)
-        M = np.column_stack([(out[0][1:] - out[0][0]).T, out[0][0]]) / sigma  # whitened [A c]
-        e = X_h @ M.T
-        c2 = np.einsum("ij,ij->i", e, e)
+            R_wo, t_wo = T[..., :3, :3], T[..., :3, 3]
+        R_a, R_b, t_a, t_b = R_wo[:, 0], R_wo[:, 1], t_wo[:, 0], t_wo[:, 1]
+        v_dt = velocity[:, :3] * dt[:, None]
+        w_dt = velocity[:, 3:] * dt[:, None]
+        R_ad = R_a @ so3_exp(w_dt)
+        a_v = np.einsum("rij,rj->ri", R_a, v_dt)
+        M = np.concatenate([R_b - R_ad, (t_b - t_a - a_v)[:, :, None]], axis=2) / sigma[:, None, None]  # [A c]
+        e = np.einsum("nl,ril->rni", X_h, M)
+        c2 = np.einsum("rni,rni->rn", e, e)
         if H is None:
             cost2 = c2.sum() if huber_delta2 is None else 2.0 * huber_cost(c2, huber_delta2).sum()
-            r = np.zeros(12)
+            r = np.zeros(12 * R)
             r[0] = np.sqrt(cost2)
             return r
         w = huber_scale(c2, huber_delta2, True) ** 2
-        lam, U = np.linalg.eigh((X_h * w[:, None]).T @ X_h)
-        L = U * np.sqrt(np.maximum(lam, 0.0))
-        blocks = []
-        for J in out[1:4]:  # J_a, J_b, J_vel: (4 basis points x 3, 6)
-            G = J.reshape(4, 3, 6) / sigma
-            G = np.concatenate([G[1:] - G[0], G[:1]])  # d column l of M
-            blocks.append(np.einsum("lk,lij->kij", L, G).reshape(12, 6))
-        J_a, J_b, J_vel = blocks
+        lam, U = np.linalg.eigh(np.einsum("nl,rn,nm->rlm", X_h, w, X_h))
+        L = U * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
+        # d column l of [A c] (l < 3: A's columns, 3: c) on each key's right perturbation (omega, nu)
+        G = np.zeros((3, R, 4, 3, 6))  # pose a, pose b, velocity
+        G[0, :, :3, :, :3] = hat(np.swapaxes(R_ad, 1, 2)) @ R_a[:, None]
+        G[0, :, 3, :, :3] = hat(a_v) @ R_a
+        G[0, :, 3, :, 3:] = -R_a
+        G[1, :, :3, :, :3] = -hat(np.swapaxes(R_b, 1, 2)) @ R_b[:, None]
+        G[1, :, 3, :, 3:] = R_b
+        G[2, :, :3, :, 3:] = hat(np.swapaxes(R_ad, 1, 2)) @ (R_ad @ so3_right_jacobian(w_dt) * dt[:, None, None])[:, None]
+        G[2, :, 3, :, :3] = -R_a * dt[:, None, None]
+        B = np.einsum("rlk,grlij->grkij", L, G).reshape(3, R, 12, 6) / sigma[None, :, None, None]
+        blocks = np.zeros((len(keys), R, 12, 6))
         if via_camera:
-            J_a, J_b = J_a @ adjoint(Q_a), J_b @ adjoint(Q_b)
-            H[0], H[1], H[2], H[3] = J_a, J_b, -J_a, -J_b
+            B_a, B_b = B[0] @ _adjoints(Q[:, 0]), B[1] @ _adjoints(Q[:, 1])
+            for j, block in enumerate((B_a, B_b, -B_a, -B_b, B[2])):
+                blocks[role[:, j], pairs] += block
         else:
-            H[0], H[1] = J_a, J_b
-        H[n_pose] = J_vel
-        return (M @ L).T.ravel()
+            for j in range(3):
+                blocks[role[:, j], pairs] += B[j]
+        H[:] = gtsam.JacobianVector(list(blocks.reshape(len(keys), 12 * R, 6)))
+        return np.swapaxes(M @ L, 1, 2).ravel()
 
-    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(12), list(keys), error)
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(12 * R), keys.tolist(), error)
 
 
 def direct_projection_factor(
