@@ -1,6 +1,13 @@
 """Benchmark of the bundle adjustment with objects (dynaslam2.optim.object_ba), median ms.
 
     python benchmarks/bench_object_ba.py [--repeats 5] [--set optim.objects.motion_points_variable=true ...]
+    python benchmarks/bench_object_ba.py --capture /tmp/bench_dynamic/traffic_s0_150_640x480 --windows W.pkl
+    python benchmarks/bench_object_ba.py --windows W.pkl --compare optim.objects.motion_form=stacked ""
+
+--capture runs the `dynamic` mode on a sequence and saves every BA-with-objects window it solves
+(the problems as built by mapping.objects.object_local_ba); --compare replays them under two
+comma-separated override lists A and B, alternating in the same run (best of 2 per window), and
+prints per-window CPU times, iterations and final costs, and the median B/A ratio.
 
 A traffic-like synthetic window (dynaslam2.optim.synthetic_objects): 10 keyframes over 2 s (2 fixed),
 a KITTI-like stereo camera at 8 m/s, 1500 static points seen by up to 5 keyframes, 4 objects x 80
@@ -17,7 +24,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import pickle
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -56,11 +65,74 @@ def run(label: str, window, problem, cfg, repeats: int) -> float:
     return float(np.median(cpu))
 
 
+def capture(sequence: Path, out: Path) -> None:
+    """Run the dynamic mode on `sequence`, pickling every (problem, camera) passed to the object BA."""
+    import dynaslam2.mapping.objects as mapping_objects
+    from dynaslam2.io.sequence import open_sequence
+    from dynaslam2.system import System
+
+    windows = []
+
+    def recording(problem, camera, cfg):
+        windows.append((problem, camera))
+        return object_bundle_adjustment(problem, camera, cfg)
+
+    mapping_objects.object_bundle_adjustment = recording  # the benchmark's own process only
+    seq = open_sequence(sequence)
+    system = System(load_config(None, ["mode=dynamic"]), seq.camera)
+    for i in range(len(seq)):
+        system.process(seq[i])
+    tmp = out.with_suffix(".tmp")
+    with open(tmp, "wb") as fh:
+        pickle.dump(windows, fh)
+    os.replace(tmp, out)
+    print(f"{len(windows)} windows -> {out}")
+
+
+def compare(windows_path: Path, spec_a: str, spec_b: str, base: list[str]) -> None:
+    """Replay saved windows under override lists A and B (same run, alternating), CPU time per window."""
+    with open(windows_path, "rb") as fh:
+        windows = pickle.load(fh)
+    cfgs = [load_config(None, base + [kv for kv in spec.split(",") if kv]).optim for spec in (spec_a, spec_b)]
+    rows = []
+    for i, (problem, camera) in enumerate(windows):
+        out = []
+        for cfg in cfgs:
+            best = np.inf
+            for _ in range(2):
+                c = time.process_time()
+                result = object_bundle_adjustment(problem, camera, cfg)
+                best = min(best, 1e3 * (time.process_time() - c))
+            out.append((best, result))
+        (ta, ra), (tb, rb) = out
+        rows.append((ta, tb, ra.final_error, rb.final_error))
+        case = "both" if problem.optimize_static else "object weak"
+        print(f"{i:3d} {case:11s} K={len(problem.T_c_w)} static obs {len(problem.obs_kf)} object obs "
+              f"{len(problem.oobs_f)}: A {ta:.0f} ms ({ra.iterations} it, cost {ra.final_error:.2f}), "
+              f"B {tb:.0f} ms ({rb.iterations} it, cost {rb.final_error:.2f}), B/A {tb / ta:.2f}", flush=True)
+    a = np.array(rows)
+    print(f"A: {spec_a or 'defaults'}; B: {spec_b or 'defaults'}; {len(a)} windows, load average "
+          f"{os.getloadavg()[0]:.2f}: median CPU A {np.median(a[:, 0]):.0f} ms, B {np.median(a[:, 1]):.0f} ms; "
+          f"median B/A {np.median(a[:, 1] / a[:, 0]):.3f}, summed B/A {a[:, 1].sum() / a[:, 0].sum():.3f}; "
+          f"summed final cost A {a[:, 2].sum():.1f}, B {a[:, 3].sum():.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override optim.key=value")
+    parser.add_argument("--capture", type=Path, metavar="SEQ", help="save the object BA windows of a dynamic run")
+    parser.add_argument("--windows", type=Path, help="file of saved windows (written by --capture)")
+    parser.add_argument("--compare", nargs=2, metavar=("A", "B"), help="replay --windows under two override lists")
     args = parser.parse_args()
+    if args.capture or args.compare:
+        if args.windows is None:
+            parser.error("--capture and --compare need --windows")
+        if args.capture:
+            capture(args.capture, args.windows)
+        if args.compare:
+            compare(args.windows, *args.compare, args.overrides)
+        return
     cfg = load_config(None, args.overrides).optim
     window = make_object_window(np.random.default_rng(0), CAMERA, n_keyframes=10, n_fixed=2, n_static=1500,
                                 n_objects=4, n_object_points=80, outlier_fraction=0.05)
