@@ -283,6 +283,9 @@ class ObjectsConfig:
     # Creation: an unclaimed dynamic-class instance with this many keypoints with stereo depth
     # closer than max_point_depth_m ("new nearby keypoints") creates an object.
     min_new_points: int = 10
+    # A small (far) instance with fewer also creates one when its close keypoints are >= min_inliers
+    # and >= small_new_fraction of its free keypoints (0 disables).
+    small_new_fraction: float = 0.0
     max_point_depth_m: float = 40.0
     # New object points farther than this from the median of the instance's points are dropped
     # (keypoints on the mask border that see the background).
@@ -359,7 +362,7 @@ class ObjectsConfig:
         if self.coast_max_s < 0:
             raise ConfigError(f"objects.coast_max_s: expected >= 0, got {self.coast_max_s}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",
-                     "projection_nn_ratio", "weak_tracked_ratio"):
+                     "projection_nn_ratio", "weak_tracked_ratio", "small_new_fraction"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"objects.{name}: expected in [0, 1], got {getattr(self, name)}")
 

@@ -265,3 +265,24 @@ def test_points_first_seen_far_take_the_depth_of_closer_views(fuse):
     T = rigid_fit(X_est, X_true[body_idx])
     rms = np.sqrt(np.mean(np.sum((X_est @ T[:3, :3].T + T[:3, 3] - X_true[body_idx]) ** 2, axis=1)))
     assert (rms < 0.15) if fuse else (rms > 0.3)
+
+
+def test_small_instance_creates_an_object_from_fewer_close_points():
+    """With objects.small_new_fraction, a far pedestrian whose 7 keypoints all have depth creates an
+    object below min_new_points; a car instance with the same 7 close keypoints among 40 (the others
+    without stereo depth) does not, nor does the pedestrian without the option."""
+    rng = np.random.default_rng(9)
+    ped = Body(rng, 2001, 7, (0.6, 1.7, 0.4))
+    car = Body(rng, 1002, 40, (4.0, 1.5, 1.5))
+    T_ped = make_pose(np.eye(3), np.array([-3.0, 0.0, 25.0]))
+    T_car = make_pose(np.eye(3), np.array([3.0, 0.0, 20.0]))
+    for fraction, expected in ((0.5, [2001]), (0.0, [])):
+        frame = make_frame(0, [(ped, T_ped), (car, T_car)])
+        no_depth = np.flatnonzero(frame.instance_id == 1002)[7:]
+        frame.depth[no_depth] = -1.0
+        frame.u_right[no_depth] = -1.0
+        trk = tracker("objects.min_new_points=10", f"objects.small_new_fraction={fraction}")
+        result = trk.track(frame, None, ObjectMap())
+        assert [e.instance_id for e in result.estimates] == expected
+        if expected:
+            assert result.estimates[0].n_points == 7

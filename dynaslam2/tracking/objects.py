@@ -398,10 +398,13 @@ class ObjectTracker:
         """An unclaimed instance: joins an unseen track (point votes with >= min_inliers close
         keypoints, then box IoU with a track measured within join_max_gap_s, or within coast_max_s
         when the instance has fewer close keypoints: no points then) or, with >=
-        min_new_points close keypoints, creates an object at the centroid of its points with identity
-        rotation (III-B)."""
+        min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
+        small_new_fraction of its keypoints), creates an object at the centroid of its points with
+        identity rotation (III-B)."""
         cfg = self.cfg
-        kp = self._close(frame, np.flatnonzero(free & (frame.instance_id == inst)))
+        kp = np.flatnonzero(free & (frame.instance_id == inst))
+        n_instance = len(kp)
+        kp = self._close(frame, kp)
         X_w = self._world_points(frame, kp)
         ok = self._compact(X_w)
         kp, X_w = kp[ok], X_w[ok]
@@ -423,7 +426,7 @@ class ObjectTracker:
             self._observe(frame, objects, tr, T_w_o, kp, new, inst, box, measured=False)
             free[kp] = False
             return tr.track_id
-        if len(kp) < cfg.min_new_points:
+        if len(kp) < cfg.min_new_points and not (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
             return None
         tr = objects.new_track(CLASS_NAMES[int(inst) // 1000])
         centroid = X_w.mean(axis=0)
