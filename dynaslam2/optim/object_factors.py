@@ -1,7 +1,9 @@
 """Python factors of the bundle adjustment with objects: eq. (4)-(5) and the direct form of eq. (2).
 
-One `gtsam.CustomFactor` per object per frame pair (eq. 4) or per object observation (eq. 2, direct
-form), stacking all the object's points with closed-form numpy Jacobians. Eq. (3) is gtsam's built-in
+Eq. (4): one `gtsam.CustomFactor` per object over all its frame pairs, 12 rows per pair from the
+moments of its (constant) points (`motion_factor_object`), or the reference per frame pair with 3 rows
+per point (`motion_factor`, also with the points as variables); eq. (2) direct form: one per object
+observation (`direct_projection_factor`). Closed-form numpy Jacobians. Eq. (3) is gtsam's built-in
 `BetweenFactorVector` and the Q-parametrized eq. (2) the built-in stereo factors (object_ba.py).
 
 Conventions: `T_w_o` maps object points into the world (paper T_WO); the velocity variable of an
