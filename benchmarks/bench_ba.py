@@ -2,6 +2,7 @@
 
     python benchmarks/bench_ba.py [--repeats 7] [--set optim.ordering=COLAMD ...] [--pose-builtin]
         [--compare optim.lambda_fixed_factor=true,optim.linear_solver=SEQUENTIAL_CHOLESKY ...]
+        [--slam-windows SEQ [--slam-frames 51]]
 
 Synthetic KITTI-like problems (dynaslam2.optim.synthetic): pose-only with N = 300 and 1000
 correspondences (half stereo, 20% gross outliers); local BA on 10 local + 5 fixed keyframes
@@ -12,6 +13,11 @@ Wall and CPU (process) time are both printed: the machine is shared, CPU time is
 every variant in turn within each repeat and print its median CPU time as a ratio to the first config.
 `--pose-builtin` also times the pose-only alternative built from gtsam built-in factors only
 (points as variables held by strong priors), to compare with the CustomFactor used.
+`--slam-windows SEQ` instead replays the local BA windows of a SLAM run (static mode, the first
+`--slam-frames` frames of SEQ, e.g. ../shared/data/kitti-odometry-06): every config on every window,
+CPU time as a ratio to the first config, and how far each ends from the converged window (30 + 60
+LM iterations, no early stop): mean keyframe distance and cost ratio. Real windows start near their
+optimum (only the new keyframe and points are off), unlike the synthetic ones.
 """
 
 from __future__ import annotations
@@ -19,12 +25,16 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from pathlib import Path
 
 import gtsam
 import numpy as np
 
+import dynaslam2.mapping.local_mapping as local_mapping
 from dynaslam2.config import OptimConfig, load_config
+from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, se3_exp, transform
+from dynaslam2.io.sequence import open_sequence
 from dynaslam2.optim import BAProblem, local_bundle_adjustment, optimize_pose
 from dynaslam2.optim.gtsam_utils import (
     add_stereo_projection_factors,
@@ -36,6 +46,7 @@ from dynaslam2.optim.gtsam_utils import (
 )
 from dynaslam2.optim.reprojection import chi2, chi2_thresholds, residuals
 from dynaslam2.optim.synthetic import kitti_like_camera, make_window, observe, perturb_poses, sample_points_in_view
+from dynaslam2.system import System
 
 CAMERA = kitti_like_camera()
 
@@ -117,6 +128,53 @@ def bench_window(rng: np.random.Generator, cfgs: list[tuple[str, OptimConfig]], 
               f"-> {r.final_error:.0f}, inliers {r.inlier.mean():.3f}, max keyframe error {100 * t_err:.2f} cm")
 
 
+def slam_windows(seq_path: Path, frames: int) -> tuple[list[BAProblem], StereoCamera]:
+    """The local BA windows of a static-mode SLAM run on the first `frames` frames, and the camera
+    (captured by wrapping the local BA that local mapping calls)."""
+    seq = open_sequence(seq_path)
+    windows = []
+    solve = local_mapping.local_bundle_adjustment
+
+    def capture(problem, camera, cfg):
+        windows.append(problem)
+        return solve(problem, camera, cfg)
+
+    local_mapping.local_bundle_adjustment = capture
+    try:
+        system = System(load_config(None, ["mode=static"]), seq.camera)
+        for i in range(min(frames, len(seq))):
+            system.process(seq[i])
+    finally:
+        local_mapping.local_bundle_adjustment = solve
+    return windows, seq.camera
+
+
+def bench_slam_windows(seq_path: Path, frames: int, cfgs: list[tuple[str, OptimConfig]], repeats: int) -> None:
+    """Every config on every captured window (min CPU of `repeats`), against the converged window."""
+    windows, camera = slam_windows(seq_path, frames)
+    converge = OptimConfig(local_ba_iterations_robust=30, local_ba_iterations_refine=60, ba_relative_error_tol=0.0)
+    cpu = np.zeros((len(cfgs), len(windows)))
+    dist_cm = np.zeros_like(cpu)
+    cost_ratio = np.zeros_like(cpu)
+    for j, problem in enumerate(windows):
+        ref = local_bundle_adjustment(problem, camera, converge)
+        free = ~problem.fixed
+        for i, (_, cfg) in enumerate(cfgs):
+            runs = [median_ms(lambda: local_bundle_adjustment(problem, camera, cfg), 1) for _ in range(repeats)]
+            cpu[i, j] = min(r[1] for r in runs)
+            r = runs[-1][2][0]
+            dist_cm[i, j] = 100 * np.linalg.norm(r.T_c_w[free, :3, 3] - ref.T_c_w[free, :3, 3], axis=1).mean()
+            cost_ratio[i, j] = r.final_error / ref.final_error
+    sizes = np.array([(len(w.X_w), len(w.obs_kf)) for w in windows])
+    print(f"{len(windows)} local BA windows of {seq_path.name} (median {np.median(sizes[:, 0]):.0f} points, "
+          f"{np.median(sizes[:, 1]):.0f} observations)")
+    for i, (name, _) in enumerate(cfgs):
+        print(f"  [{name}] median {np.median(cpu[i]):.0f} ms CPU ({np.median(cpu[i] / cpu[0]):.2f}x per window, "
+              f"{cpu[i].sum() / cpu[0].sum():.2f}x summed); from the converged window: keyframes "
+              f"{np.median(dist_cm[i]):.2f} cm (median of means, max {dist_cm[i].max():.2f}), cost "
+              f"x{np.median(cost_ratio[i]):.4f} (max x{cost_ratio[i].max():.4f})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
@@ -125,11 +183,17 @@ def main() -> None:
     parser.add_argument("--skip-pose", action="store_true")
     parser.add_argument("--compare", action="append", default=[],
                         help="a config variant for the BA windows: comma-separated optim.key=value overrides")
+    parser.add_argument("--slam-windows", type=Path, default=None, metavar="SEQ",
+                        help="replay the local BA windows of a SLAM run on SEQ instead of the synthetic benchmarks")
+    parser.add_argument("--slam-frames", type=int, default=51)
     args = parser.parse_args()
     cfg = load_config(None, args.overrides).optim
     cfgs = [("config", cfg)] + [(v, load_config(None, args.overrides + v.split(",")).optim) for v in args.compare]
     rng = np.random.default_rng(0)
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    if args.slam_windows is not None:
+        bench_slam_windows(args.slam_windows, args.slam_frames, cfgs, args.repeats)
+        return
     if not args.skip_pose:
         for n in (300, 1000):
             T_init, X_w, obs = pose_problem(rng, n)

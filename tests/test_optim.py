@@ -176,8 +176,9 @@ def ba_problem(seed: int, outlier_fraction: float = 0.0, n_fixed: int = 3, noise
 def test_local_ba_exact_measurements_recover_the_window_exactly():
     """Noise-free inliers plus gross outliers: the optimum is the truth (the fixed keyframes set the gauge)."""
     window, problem = ba_problem(7, outlier_fraction=0.05, noise_scale=0.0)
-    # all 5 + 10 iterations (no early stop): far monocular points converge slowly along their rays
-    result = local_bundle_adjustment(problem, CAMERA, OptimConfig(ba_relative_error_tol=0.0))
+    # 5 + 10 iterations (ORB-SLAM2's), no early stop: far monocular points converge slowly along their rays
+    cfg = OptimConfig(ba_relative_error_tol=0.0, local_ba_iterations_robust=5, local_ba_iterations_refine=10)
+    result = local_bundle_adjustment(problem, CAMERA, cfg)
     free = ~window.fixed
     dt, dr = pose_errors(result.T_c_w[free], window.T_c_w_true[free])
     assert dt.max() < 1e-4 and dr.max() < 1e-3
@@ -218,11 +219,13 @@ def test_local_ba_noisy_window_and_fixed_keyframes():
 def test_local_ba_lambda_schedules_reach_the_same_optimum():
     """Nielsen's damping update (the default, fewer rejected LM steps) and gtsam's fixed factor 10 converge
     to the same window: same inliers, poses within 0.1 mm / 0.001 deg, the same cost within 1e-4.
-    (Both stages run to convergence: a robust stage cut short can classify a few observations differently.)"""
+    (Both stages run to convergence: a robust stage cut short can classify a few observations differently.
+    Both start from lambda 1: from this hard 5 cm initialization the near Gauss-Newton first steps of the
+    default 1e-4 can settle in another local minimum of the robust cost, 1-2% higher, whichever schedule.)"""
     _, problem = ba_problem(7, outlier_fraction=0.05)
-    results = [local_bundle_adjustment(problem, CAMERA, OptimConfig(ba_relative_error_tol=0.0, ba_iterations_robust=30,
-                                                                   ba_iterations_refine=60, lambda_fixed_factor=fixed))
-               for fixed in (True, False)]
+    cfgs = [OptimConfig(ba_relative_error_tol=0.0, local_ba_iterations_robust=30, local_ba_iterations_refine=60,
+                        lambda_fixed_factor=fixed, local_ba_lambda_initial=1.0) for fixed in (True, False)]
+    results = [local_bundle_adjustment(problem, CAMERA, cfg) for cfg in cfgs]
     dt, dr = pose_errors(results[1].T_c_w, results[0].T_c_w)
     assert dt.max() < 1e-4 and dr.max() < 1e-3
     assert np.array_equal(results[0].inlier, results[1].inlier)

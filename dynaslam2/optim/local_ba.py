@@ -4,10 +4,13 @@ The problem is plain arrays (`BAProblem`); gtsam stays inside. Keyframe `k` is t
 `T_w_c` at key `pose_keys[k]`, point `j` the Point3 `X_w` at `point_keys[j]` (`allocate_keys`); a
 later block of variables (objects) adds a size to `allocate_keys` and its own factors.
 
-Cost (benchmarks/bench_ba.py, 15 keyframes, 3000 points, 14k observations, 2 loaded cores): ~300-450 ms
-CPU for 4-5 LM iterations; per LM trial gtsam's sequential Cholesky elimination of ~2850 variables
-(~30-50 ms, points first) dominates, then linearization (~15 ms); building the graphs (`add_stereo_factors`,
-stereo factors made in a Python loop) ~15-20%. Measured and dropped: gtsam's SfmLevenbergMarquardtOptimizer
+Cost (SLAM windows of sim static 640x480: ~3300 points, ~14.7k observations; 2 loaded cores): one LM
+iteration is gtsam's sequential Cholesky elimination (~50-70 ms, points first), linearization (~15-20 ms)
+and two error evaluations; with the default single robust iteration (`OptimConfig.local_ba_*`) building
+the graph (`add_stereo_factors`, stereo factors made in a Python loop, ~3.3 us each) is ~1/4 and the
+Values ~5%. Measured and dropped: numpy Schur complement on gtsam's linearization (`sparseJacobian_`
+alone costs as much as `linearize`: <= 1.4x per iteration for much code), C++-built projection pairs
+for the robust stage too (1.03x: cheaper build, costlier elimination), gtsam's SfmLevenbergMarquardtOptimizer
 (Full and Schur modes, 1.1-2.5x slower), smart factors (SmartProjectionRigFactor with per-level scaled
 calibrations: linearizing 2800 of them costs more than eliminating the points; no Huber), Dogleg (cheaper
 steps, ~30% higher cost after 5), Gauss-Newton (the first step already raises the cost), leaving single
@@ -71,8 +74,8 @@ class BAResult:
 
 
 def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: OptimConfig) -> BAResult:
-    """`cfg.ba_iterations_robust` LM iterations with Huber, drop observations with chi2 > 7.815 (stereo) /
-    5.991 (mono) or behind the camera, then `cfg.ba_iterations_refine` iterations without kernel.
+    """`cfg.local_ba_iterations_robust` LM iterations with Huber, drop observations with chi2 > 7.815 (stereo) /
+    5.991 (mono) or behind the camera, then `cfg.local_ba_iterations_refine` iterations without kernel.
 
     Fixed keyframes stay exactly as given (held by strong priors: measured ~2x faster than
     NonlinearEquality, which makes gtsam eliminate with QR); with none fixed, the first keyframe fixes
@@ -106,7 +109,9 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
 
     iterations = 0
     timings_ms = {"build": 1e3 * (time.perf_counter() - t_start), "solve": 0.0}
-    for robust, n_iter in ((True, cfg.ba_iterations_robust), (False, cfg.ba_iterations_refine)):
+    for robust, n_iter in ((True, cfg.local_ba_iterations_robust), (False, cfg.local_ba_iterations_refine)):
+        if not robust and n_iter == 0:
+            break  # no refine stage: the final classification below is ORB-SLAM2's outlier removal
         if not robust:
             c2, depth = _chi2_depth(problem, T_c_w, X_w, camera)
             use = _determined(problem, (c2 <= th) & (depth > cfg.min_depth), stereo)
@@ -131,7 +136,8 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
         add_factors(graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]], problem.meas[use],
                     problem.inv_sigma2[use], camera, np.sqrt(cfg.chi2_mono) if robust else None,
                     np.sqrt(cfg.chi2_stereo) if robust else None)
-        params = lm_params(cfg, n_iter, cfg.ba_relative_error_tol, np.concatenate([pt_key[pt_idx], kf_key[kf_idx]]))
+        params = lm_params(cfg, n_iter, cfg.ba_relative_error_tol, np.concatenate([pt_key[pt_idx], kf_key[kf_idx]]),
+                           cfg.local_ba_lambda_initial)
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
         t_solve = time.perf_counter()
         values = optimizer.optimize()
