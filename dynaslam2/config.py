@@ -165,7 +165,9 @@ class MappingConfig:
     kf_cull_redundancy: float = 0.9
     kf_cull_observers: int = 3
     # Local BA: window of covisible keyframes around the new one, and at most this many fixed
-    # keyframes (those outside the window that see the most window points).
+    # keyframes (those outside the window that see the most window points). Measured with the default
+    # optim.local_ba_* (static mode, 100 frames): 10 + 5 fixed cost 0.77x the BA CPU time on sim static s1
+    # but raised the ATE 0.043 -> 0.050 m (s1), 0.056 -> 0.061 m (s0); KITTI 06 0.0707 -> 0.0701 m.
     ba_max_keyframes: int = 20
     ba_max_fixed_keyframes: int = 10
     # Points in the BA problem need this many observing keyframes (1 = all, as ORB-SLAM2).
@@ -207,6 +209,7 @@ class ObjectOptimConfig:
     # normal equations and Huber cost of "stacked" (a factor per frame pair, 3 rows per point: the reference
     # form); see object_factors.motion_factor_object
     motion_form: Literal["moments", "stacked"] = "moments"
+    lambda_initial: float = 1.0  # LM's initial lambda of the BA with objects (optim.lambda_initial: pose-only)
     min_observation_points: int = 5  # an object observation with fewer used point observations keeps its pose
     tail_seconds: float = 2.0  # object-weak BA (III-D): keyframes within this time of the newest are free
 
@@ -219,6 +222,8 @@ class ObjectOptimConfig:
             raise ConfigError(f"optim.objects.min_observation_points: expected >= 3, got {self.min_observation_points}")
         if not self.tail_seconds > 0:
             raise ConfigError(f"optim.objects.tail_seconds: expected > 0, got {self.tail_seconds}")
+        if not self.lambda_initial > 0:
+            raise ConfigError(f"optim.objects.lambda_initial: expected > 0, got {self.lambda_initial}")
 
 
 @dataclass
@@ -241,9 +246,12 @@ class OptimConfig:
     # outliers and without kernel (ORB-SLAM2's 5 + 10)
     ba_iterations_robust: int = 5
     ba_iterations_refine: int = 10
-    # Static local BA (optim/local_ba.py), the same stages. From local_ba_lambda_initial = 1e-4 one robust
-    # iteration and no refine measured as accurate as more: ATE on KITTI 06 and sim static s0/s1 (1 + 0 vs
-    # 1 + 1 vs 2 + 0), at 0.36-0.40x the CPU time of 5 + 10 from lambda 1.
+    # Static local BA (optim/local_ba.py), the same stages. Measured (static mode, same process per row;
+    # ATE m / median BA CPU ms per keyframe) for 5 + 10 from lambda 1, then from 1e-4: 1 + 0, 2 + 0, 1 + 1:
+    #   sim static s0 150 fr: 0.218 / 552, 0.068 / 162, 0.057 / 290, 0.053 / 340
+    #   sim static s1 150 fr: 0.126 / 460, 0.043 / 151, 0.046 / 249, 0.047 / 329
+    #   KITTI 06 51 fr: 0.0721 / 169, 0.0707 / 61, (2 + 0: 0.0684), 0.0690 / 126
+    # 1 + 0 is the fastest and 2-3x more accurate than the old 5 + 10; more iterations gain < 20%, not always.
     local_ba_iterations_robust: int = 1
     local_ba_iterations_refine: int = 0
     min_depth: float = 1e-3  # observations of points closer than this (or behind) are outliers
