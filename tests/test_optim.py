@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import gtsam
 import numpy as np
 import pytest
@@ -11,6 +13,7 @@ from dynaslam2.errors import InputError
 from dynaslam2.geometry.se3 import inverse, se3_exp, se3_log, transform
 from dynaslam2.optim import BAProblem, local_bundle_adjustment, optimize_pose
 from dynaslam2.optim.gtsam_utils import (
+    StereoFactorCache,
     add_stereo_factors,
     add_stereo_projection_factors,
     allocate_keys,
@@ -237,6 +240,40 @@ def test_local_ba_without_fixed_keyframes_fixes_the_first():
     result = local_bundle_adjustment(problem, CAMERA, OptimConfig())
     assert np.array_equal(result.T_c_w[0], problem.T_c_w[0])
     assert result.final_error < result.initial_error
+
+
+def test_local_ba_factor_cache_reuses_factors_with_the_same_result():
+    """With stable ids, a StereoFactorCache hands the next call the factors of the observations it shares
+    with the previous one (same keys, measurement and sigma); the result is that of fresh factors."""
+    _, problem = ba_problem(12, outlier_fraction=0.05)
+    K, P = len(problem.T_c_w), len(problem.X_w)
+    with_ids = dataclasses.replace(problem, kf_ids=3 * np.arange(K) + 5, pt_ids=2 * np.arange(P) + 1)
+    cfg = OptimConfig()
+    plain = local_bundle_adjustment(problem, CAMERA, cfg)
+    cache = StereoFactorCache()
+    first = local_bundle_adjustment(with_ids, CAMERA, cfg, cache)
+    assert cache.reused == 0
+    assert np.abs(first.T_c_w - plain.T_c_w).max() < 1e-9 and np.abs(first.X_w - plain.X_w).max() < 1e-9
+    again = local_bundle_adjustment(with_ids, CAMERA, cfg, cache)
+    n_stereo = int((problem.meas[:, 2] >= 0).sum())
+    assert cache.reused == n_stereo
+    assert np.array_equal(again.T_c_w, first.T_c_w) and np.array_equal(again.X_w, first.X_w)
+    # next window: the first keyframe's observations gone, one measurement moved by a pixel
+    keep = problem.obs_kf != 0
+    meas = problem.meas[keep].copy()
+    moved = int(np.flatnonzero(meas[:, 2] >= 0)[0])
+    meas[moved, 0] += 1.0
+    meas[moved, 2] += 1.0
+    shifted = dataclasses.replace(with_ids, obs_kf=problem.obs_kf[keep], obs_pt=problem.obs_pt[keep], meas=meas,
+                                  inv_sigma2=problem.inv_sigma2[keep])
+    cached = local_bundle_adjustment(shifted, CAMERA, cfg, cache)
+    assert cache.reused == int((meas[:, 2] >= 0).sum()) - 1
+    fresh = local_bundle_adjustment(shifted, CAMERA, cfg, StereoFactorCache())
+    assert np.array_equal(cached.T_c_w, fresh.T_c_w) and np.array_equal(cached.X_w, fresh.X_w)
+    with pytest.raises(InputError, match="cache"):
+        local_bundle_adjustment(problem, CAMERA, cfg, cache)
+    with pytest.raises(InputError, match="kf_ids"):
+        local_bundle_adjustment(dataclasses.replace(with_ids, kf_ids=with_ids.kf_ids[::-1].copy()), CAMERA, cfg)
 
 
 def test_local_ba_bad_input():

@@ -17,7 +17,7 @@ from dynaslam2.geometry.se3 import hat
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.keyframe import KeyFrame
 from dynaslam2.map.map import Map
-from dynaslam2.optim.local_ba import BAProblem, local_bundle_adjustment
+from dynaslam2.optim.local_ba import BAProblem, StereoFactorCache, local_bundle_adjustment
 from dynaslam2.tracking.camera import predicted_levels, rigid, transform_points
 
 
@@ -101,10 +101,12 @@ class LocalMapper:
         self.log_scale = float(np.log(self.scale_factors[1])) if self.n_levels > 1 else 1.0
         self.recent_points = np.zeros(0, dtype=np.int64)
         self.next_kf_id = 0
+        self.ba_factors = StereoFactorCache()  # the last local BA window's stereo factors, for the next one
 
     def reset(self) -> None:
         """Forget per-map state (a new map segment)."""
         self.recent_points = np.zeros(0, dtype=np.int64)
+        self.ba_factors = StereoFactorCache()
 
     # --------------------------------------------------------------- insertion
     def create_keyframe(self, frame: Frame, map_: Map, new_points_min: int) -> KeyFrame:
@@ -381,13 +383,13 @@ class LocalMapper:
         pts = pts[n_views[pts] >= self.cfg.ba_min_views]
         if len(pts) == 0:
             return
-        all_ids = local + fixed_ids
-        fixed = np.array([False] * len(local) + [True] * len(fixed_ids))
+        all_ids = sorted(local + fixed_ids)  # increasing ids: the BA's stable keys (factor cache)
+        fixed = np.isin(all_ids, fixed_ids)
         first_id = min(map_.keyframes)
         if first_id in local_set:
-            fixed[local.index(first_id)] = True
+            fixed[all_ids.index(first_id)] = True
         if not fixed.any():
-            fixed[int(np.argmin(local))] = True
+            fixed[all_ids.index(min(local))] = True
         if fixed.all():
             return
         kf_index = np.full(max(all_ids) + 1, -1, dtype=np.int64)
@@ -404,9 +406,9 @@ class LocalMapper:
         problem = BAProblem(
             T_c_w=np.stack([map_.keyframes[k].T_c_w for k in all_ids]), fixed=fixed,
             X_w=map_.points.X_w[pts].copy(), obs_kf=kf_index[obs_kf], obs_pt=pt_index[obs_pt],
-            meas=meas, inv_sigma2=inv_sigma2,
+            meas=meas, inv_sigma2=inv_sigma2, kf_ids=np.array(all_ids, dtype=np.int64), pt_ids=pts,
         )
-        result = local_bundle_adjustment(problem, self.camera, self.config.optim)
+        result = local_bundle_adjustment(problem, self.camera, self.config.optim, self.ba_factors)
         if not (np.all(np.isfinite(result.T_c_w)) and np.all(np.isfinite(result.X_w))):
             return
         for i, k in enumerate(all_ids):

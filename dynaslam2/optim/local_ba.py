@@ -30,6 +30,7 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
 from dynaslam2.optim.gtsam_utils import (
     add_stereo_factors,
+    StereoFactorCache,
     add_stereo_projection_factors,
     allocate_keys,
     extract_points,
@@ -41,6 +42,7 @@ from dynaslam2.optim.gtsam_utils import (
 from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, is_stereo, residuals
 
 FIXED_POSE_SIGMA = 1e-9  # prior sigma holding a fixed keyframe (its returned pose is the input, exactly)
+POINT_KEY_BASE = 2**31  # with stable ids, keyframe id k is gtsam key k and point id j key POINT_KEY_BASE + j
 
 
 @dataclass
@@ -54,6 +56,11 @@ class BAProblem:
     obs_pt: np.ndarray  # (M,) int index into points
     meas: np.ndarray  # (M, 3)
     inv_sigma2: np.ndarray  # (M,) 1/sigma^2 of the keypoint's pyramid level
+    # Optional stable ids (strictly increasing, in [0, 2^31)): the gtsam keys (points after POINT_KEY_BASE),
+    # so that a `StereoFactorCache` can reuse the factors of observations seen by the previous window.
+    # (keyword-only: subclasses such as object_ba.ObjectBAProblem add required fields after these)
+    kf_ids: np.ndarray | None = field(default=None, kw_only=True)  # (K,)
+    pt_ids: np.ndarray | None = field(default=None, kw_only=True)  # (P,)
 
 
 @dataclass
@@ -73,16 +80,20 @@ class BAResult:
     timings_ms: dict[str, float] = field(default_factory=dict)  # "build" (graph, values, ordering), "solve" (LM)
 
 
-def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: OptimConfig) -> BAResult:
+def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: OptimConfig,
+                            cache: StereoFactorCache | None = None) -> BAResult:
     """`cfg.local_ba_iterations_robust` LM iterations with Huber, drop observations with chi2 > 7.815 (stereo) /
     5.991 (mono) or behind the camera, then `cfg.local_ba_iterations_refine` iterations without kernel.
 
     Fixed keyframes stay exactly as given (held by strong priors: measured ~2x faster than
     NonlinearEquality, which makes gtsam eliminate with QR); with none fixed, the first keyframe fixes
     the gauge. Points that the kept observations cannot determine (a single monocular observation)
-    are left unchanged.
+    are left unchanged. `cache` (needs the problem's stable ids) reuses the robust stage's stereo factors
+    of observations that the previous call also had.
     """
     _check(problem)
+    if cache is not None and problem.kf_ids is None:
+        raise InputError("local_bundle_adjustment: a factor cache needs the problem's kf_ids and pt_ids")
     t_start = time.perf_counter()
     fixed = problem.fixed.astype(bool).copy()
     if not fixed.any():
@@ -97,7 +108,11 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
     use = _determined(problem, np.ones(len(problem.obs_kf), dtype=bool), stereo)
     kf_idx = np.flatnonzero(np.bincount(problem.obs_kf[use], minlength=len(T_c_w)) > 0)
     pt_idx = np.flatnonzero(np.bincount(problem.obs_pt[use], minlength=len(X_w)) > 0)
-    pose_keys, point_keys = allocate_keys(len(kf_idx), len(pt_idx))
+    if problem.kf_ids is None:
+        pose_keys, point_keys = allocate_keys(len(kf_idx), len(pt_idx))
+    else:  # increasing ids: key order is index order, as extract_poses / extract_points return them
+        pose_keys = np.asarray(problem.kf_ids, dtype=np.int64)[kf_idx]
+        point_keys = POINT_KEY_BASE + np.asarray(problem.pt_ids, dtype=np.int64)[pt_idx]
     kf_key = np.full(len(T_c_w), -1, dtype=np.int64)
     kf_key[kf_idx] = pose_keys
     pt_key = np.full(len(X_w), -1, dtype=np.int64)
@@ -132,10 +147,12 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
             graph.addPriorPose3(key, values.atPose3(key), prior)
         # Huber on the whole 3-dof stereo residual (Python-built stereo factors); without kernel the
         # C++-built projection pairs have exactly the same cost at ~1/6 of the build time.
-        add_factors = add_stereo_factors if robust else add_stereo_projection_factors
-        add_factors(graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]], problem.meas[use],
-                    problem.inv_sigma2[use], camera, np.sqrt(cfg.chi2_mono) if robust else None,
-                    np.sqrt(cfg.chi2_stereo) if robust else None)
+        args = (graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]], problem.meas[use],
+                problem.inv_sigma2[use], camera)
+        if robust:
+            add_stereo_factors(*args, np.sqrt(cfg.chi2_mono), np.sqrt(cfg.chi2_stereo), cache)
+        else:
+            add_stereo_projection_factors(*args, None, None)
         params = lm_params(cfg, n_iter, cfg.ba_relative_error_tol, np.concatenate([pt_key[pt_idx], kf_key[kf_idx]]),
                            cfg.local_ba_lambda_initial)
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
@@ -194,6 +211,12 @@ def _check(problem: BAProblem) -> None:
     if M and (problem.obs_kf.min() < 0 or problem.obs_kf.max() >= K or problem.obs_pt.min() < 0
               or problem.obs_pt.max() >= P):
         raise InputError(f"local_bundle_adjustment: obs_kf must index [0, {K}) and obs_pt [0, {P})")
+    if (problem.kf_ids is None) != (problem.pt_ids is None):
+        raise InputError("local_bundle_adjustment: kf_ids and pt_ids are given together or not at all")
+    for name, ids, n in (("kf_ids", problem.kf_ids, K), ("pt_ids", problem.pt_ids, P)):
+        if ids is not None and not (ids.shape == (n,) and (n == 0 or (ids.min() >= 0 and ids.max() < 2**31))
+                                    and np.all(np.diff(ids) > 0)):
+            raise InputError(f"local_bundle_adjustment: {name} must be ({n},), strictly increasing, in [0, 2^31)")
     if not (np.all(np.isfinite(problem.T_c_w)) and np.all(np.isfinite(problem.X_w))
             and np.all(np.isfinite(problem.meas)) and np.all(problem.inv_sigma2 > 0)):
         raise InputError("local_bundle_adjustment: poses, points and measurements must be finite, inv_sigma2 > 0")
