@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from operator import attrgetter
 
 import cv2
 import numpy as np
@@ -120,18 +121,6 @@ def _ic_kernels() -> tuple[np.ndarray, np.ndarray]:
     return w_u.ravel(), w_v.ravel()
 
 
-def _cell_keys(xy: np.ndarray, cell: float) -> np.ndarray:
-    ij = (xy / cell).astype(np.int64)  # xy >= 0
-    return ij[:, 1] * (int(ij[:, 0].max()) + 1) + ij[:, 0]
-
-
-def _n_occupied(xy: np.ndarray, cell: float) -> int:
-    keys = _cell_keys(xy, cell)
-    occupied = np.zeros(int(keys.max()) + 1, bool)
-    occupied[keys] = True
-    return int(np.count_nonzero(occupied))
-
-
 def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, area: float, tol: float = 1.05) -> np.ndarray:
     """Indices of <= n_keep points spread over the image: the best response in each cell of the largest
     square grid (within a factor `tol`) with >= n_keep occupied cells, then the n_keep best of those.
@@ -140,16 +129,27 @@ def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, area: float, 
     if n <= n_keep:
         return np.arange(n)
     order = np.argsort(-response, kind="stable")  # best first
-    xy_sorted = xy[order]
+    x = xy[order, 0].astype(np.float64)  # float32 -> float64 is exact: cell indices floor(x / cell)
+    y = xy[order, 1].astype(np.float64)
+    x_max, y_max = float(x.max()), float(y.max())
+
+    def cell_keys(cell: float) -> tuple[np.ndarray, int]:
+        """Cell index of each point (row-major) and the number of cells of the grid."""
+        stride = int(x_max / cell) + 1
+        return (y / cell).astype(np.int64) * stride + (x / cell).astype(np.int64), (int(y_max / cell) + 1) * stride
+
     # A grid of 2*sqrt(area/n_keep) cells has < n_keep cells: an upper bound; 1 px cells: n occupied.
     lo, hi = 1.0, 2.0 * np.sqrt(area / n_keep)
     while hi / lo > tol:
         mid = np.sqrt(lo * hi)
-        if _n_occupied(xy_sorted, mid) >= n_keep:
+        keys, n_cells = cell_keys(mid)
+        occupied = np.zeros(n_cells, bool)
+        occupied[keys] = True
+        if np.count_nonzero(occupied) >= n_keep:
             lo = mid
         else:
             hi = mid
-    keys = _cell_keys(xy_sorted, lo)
+    keys, _ = cell_keys(lo)
     by_key = np.argsort(keys, kind="stable")  # within a cell: best response first
     k_sorted = keys[by_key]
     winners = by_key[np.r_[True, k_sorted[1:] != k_sorted[:-1]]]
@@ -229,7 +229,7 @@ class ORBExtractor:
         kps = detector.detect(img, mask)
         if not kps:
             return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
-        return cv2.KeyPoint.convert(kps), np.fromiter((k.response for k in kps), np.float32, len(kps))
+        return cv2.KeyPoint.convert(kps), np.fromiter(map(attrgetter("response"), kps), np.float32, len(kps))
 
     def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """FAST candidates (integer xy at this level, score) by ORB-SLAM2's per-cell rule: a cell keeps its
@@ -292,7 +292,7 @@ class ORBExtractor:
         kps_out, desc = self._orb.compute(img, kps)
         if desc is None or not kps_out:
             return np.zeros(0, np.int64), np.zeros((0, 32), np.uint8)
-        idx = np.fromiter((k.class_id for k in kps_out), np.int64, len(kps_out))
+        idx = np.fromiter(map(attrgetter("class_id"), kps_out), np.int64, len(kps_out))
         return idx, desc
 
     def _extract_level(self, level: int, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, budget: int) -> Keypoints | None:
