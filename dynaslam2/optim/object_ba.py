@@ -179,6 +179,8 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
     iterations = 0
     n_parameters: dict[str, int] = {}
     for robust, n_iter in ((True, cfg.ba_iterations_robust), (False, cfg.ba_iterations_refine)):
+        if not robust and n_iter == 0:
+            break  # no refine stage: the final classification below removes the outliers
         if not robust:
             c2, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
             use = (c2 <= th) & (depth > cfg.min_depth)
@@ -194,8 +196,8 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
             n_parameters = {name: int(len(members) * dof) for name, (members, _, dof) in keys.items()}
         if graph.size() == 0:
             continue
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values,
-                                                      lm_params(cfg, n_iter, cfg.ba_relative_error_tol, ordering))
+        optimizer = gtsam.LevenbergMarquardtOptimizer(
+            graph, values, lm_params(cfg, n_iter, cfg.ba_relative_error_tol, ordering, cfg.objects.lambda_initial))
         t_solve = time.perf_counter()
         values = optimizer.optimize()
         timings_ms["build"] += 1e3 * (t_solve - t_build)
