@@ -28,7 +28,7 @@ class ORBConfig:
     edge_threshold: int = 19
     patch_size: int = 31
     cell_size: int = 30
-    threads: int = 1  # extract_pair: the right image in a worker thread when > 1 (helps only on idle cores)
+    threads: int = 2  # extract_pair: the right image in a worker thread when > 1 (OpenCV releases the GIL)
 
     def validate(self) -> None:
         if self.n_features <= 0:

@@ -38,6 +38,7 @@ class FrameBuilder:
         self.camera = camera
         self.extractor = ORBExtractor(config.orb)
         self.th_depth = config.stereo.th_depth_baselines * camera.baseline
+        self.n_features_right = max(1, round(config.stereo.right_features_factor * config.orb.n_features))
 
     def _check(self, data: FrameData) -> None:
         shape = (self.camera.height, self.camera.width)
@@ -62,11 +63,13 @@ class FrameBuilder:
             dyn = dynamic_mask(data.instances, self.config.tracking.mask_dilation_px)
         pyr_l = self.extractor.build_pyramid(to_gray(data.left))
         # masked: features on dynamic instances are never extracted, the budget goes to the rest (DynaSLAM).
-        kp = self.extractor.extract(pyr_l, mask=~dyn if (mode == "masked" and dyn is not None) else None)
+        mask = ~dyn if (mode == "masked" and dyn is not None) else None
         use_depth = data.depth is not None and (data.right is None or self.config.tracking.use_depth_image)
-        if not use_depth:
+        if use_depth:
+            kp = self.extractor.extract(pyr_l, mask=mask)
+        else:  # left and right concurrently with orb.threads > 1 (ORB-SLAM2 extracts them in two threads)
             pyr_r = self.extractor.build_pyramid(to_gray(data.right))
-            kp_r = self.extractor.extract(pyr_r)
+            kp, kp_r = self.extractor.extract_pair(pyr_l, pyr_r, mask, self.n_features_right)
         t1 = time.perf_counter()
         if use_depth:
             u_right, depth = depth_from_image(kp, data.depth, self.camera)
