@@ -342,7 +342,7 @@ class ObjectsConfig:
     join_ratio: float = 0.5
     min_join_matches: int = 6
     join_iou: float = 0.3
-    join_max_gap_s: float = 0.1
+    join_max_gap_s: float = 0.5
     # An instance with fewer than min_inliers close keypoints keeps (by box IoU) a track measured
     # within coast_max_s at its constant-velocity prediction, without new points (0: never).
     coast_max_s: float = 0.0
@@ -365,7 +365,7 @@ class ObjectsConfig:
     # Not in the paper: between BAs, each inlier stereo observation of an object point is averaged
     # into its position in the object frame, weighted by its depth information (1 px disparity at its
     # level), so that points created far away take the depth of closer views.
-    fuse_points: bool = False
+    fuse_points: bool = True
     # Not in the paper: a constant-velocity Kalman filter of each object-frame origin between BAs
     # (white acceleration accel_sigma m/s^2; pose-only position covariance from its stereo Jacobian,
     # 1 px at level 0, plus position_floor_m; unknown initial speed initial_speed_sigma m/s).
@@ -373,6 +373,9 @@ class ObjectsConfig:
     accel_sigma: float = 1.5
     position_floor_m: float = 0.05
     initial_speed_sigma: float = 10.0
+    # Validation gate: a pose-only position whose NIS against the filter's prediction exceeds this
+    # (chi2, 3 dof) is rejected as an association outlier; inf: no gate.
+    gate_nis: float = float("inf")
 
     def validate(self) -> None:
         for name in ("min_new_points", "min_projection_matches", "min_inliers", "min_join_matches",
@@ -383,7 +386,7 @@ class ObjectsConfig:
             raise ConfigError(f"objects.min_inliers: expected >= 3, got {self.min_inliers}")
         for name in ("max_point_depth_m", "max_point_spread_m", "projection_radius", "max_speed_mps",
                      "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s", "join_max_gap_s", "accel_sigma",
-                     "position_floor_m", "initial_speed_sigma"):
+                     "position_floor_m", "initial_speed_sigma", "gate_nis"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
         if self.coast_max_s < 0:

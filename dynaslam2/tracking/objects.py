@@ -179,7 +179,8 @@ class ObjectTracker:
                       kp: np.ndarray, pts: np.ndarray, robust_init: bool) -> tuple[np.ndarray, np.ndarray] | None:
         """Object pose-only optimization (III-B) of `track` from matches keypoint `kp` <-> point `pts`;
         with `robust_init` the start comes from a 3D-3D RANSAC on the stereo depths. Returns (T_w_o,
-        inlier mask) or None when too few inliers or the implied speed is not physical."""
+        inlier mask) or None when too few inliers, the implied speed is not physical or (with the filter)
+        the position fails the validation gate gate_nis."""
         cfg = self.cfg
         X_o = objects.points.X_o[pts]
         if robust_init:
@@ -200,6 +201,13 @@ class ObjectTracker:
         dt = frame.timestamp - track.last.timestamp
         if dt > 0 and np.linalg.norm(T_w_o[:3, 3] - track.last.T_w_o[:3, 3]) > cfg.max_speed_mps * dt:
             return None
+        if cfg.filter and track.state_mean is not None and np.isfinite(cfg.gate_nis):
+            # Validation gate: a position the filter's prediction cannot explain is an association outlier.
+            m, P = self._predict_state(track, dt)
+            R = self._position_noise(self._position_information(frame, objects, T_w_o, kp[inliers], pts[inliers]))
+            y = T_w_o[:3, 3] - m[:3]
+            if float(y @ np.linalg.solve(P[:3, :3] + R, y)) > cfg.gate_nis:
+                return None
         return T_w_o, inliers
 
     # ------------------------------------------------------------------ main
@@ -367,6 +375,19 @@ class ObjectTracker:
         R_w_c = frame.T_w_c[:3, :3]
         return R_w_c @ info_c @ R_w_c.T
 
+    def _predict_state(self, track: ObjectTrack, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(mean (6,), covariance (6, 6)) of the track's filter state predicted `dt` ahead."""
+        I3 = np.eye(3)
+        F = np.eye(6)
+        F[:3, 3:] = dt * I3
+        Q = self.cfg.accel_sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), I3)
+        return F @ track.state_mean, F @ track.state_cov @ F.T + Q
+
+    def _position_noise(self, info: np.ndarray) -> np.ndarray:
+        """(3, 3) covariance of a pose-only object position of information `info`, with the floor."""
+        I3 = np.eye(3)
+        return np.linalg.inv(info + 1e-9 * I3) + self.cfg.position_floor_m**2 * I3
+
     def _filter(self, track: ObjectTrack, dt: float, p_meas: np.ndarray,
                 info: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Constant-velocity Kalman filter of the object-frame origin (white acceleration of sigma
@@ -375,17 +396,13 @@ class ObjectTracker:
         cfg = self.cfg
         I3 = np.eye(3)
         if info is not None:
-            R = np.linalg.inv(info + 1e-9 * I3) + cfg.position_floor_m**2 * I3
+            R = self._position_noise(info)
         if track.state_mean is None:
             track.state_mean = np.r_[p_meas, np.zeros(3)]
             R0 = R if info is not None else cfg.position_floor_m**2 * I3
             track.state_cov = np.block([[R0, np.zeros((3, 3))], [np.zeros((3, 3)), cfg.initial_speed_sigma**2 * I3]])
             return track.state_mean[:3].copy(), track.state_mean[3:].copy()
-        F = np.eye(6)
-        F[:3, 3:] = dt * I3
-        Q = cfg.accel_sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), I3)
-        m = F @ track.state_mean
-        P = F @ track.state_cov @ F.T + Q
+        m, P = self._predict_state(track, dt)
         if info is not None:
             K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R)
             m = m + K @ (p_meas - m[:3])
@@ -469,14 +486,18 @@ class ObjectTracker:
 
     def _join_by_box(self, frame: Frame, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                      box: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
-        """The unseen track measured within `max_gap_s` whose motion-compensated box overlaps `box`
-        most, if its IoU is >= join_iou (instance-to-instance association, III-B)."""
+        """The unseen track measured within `max_gap_s` whose last box, as it was or moved by its
+        predicted image motion (wrong when the velocity is, or for a near object whose origin projects
+        off its visible part), overlaps `box` most, if that IoU is >= join_iou (instance-to-instance
+        association, III-B)."""
         cfg = self.cfg
         recent = [tr for tr in unseen if tr.last.box2d is not None
                   and frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
         if not recent or not np.all(np.isfinite(box)):
             return None
-        iou = box_iou(np.array([box]), np.array([self.predicted_box(tr, frame, pred[tr.track_id]) for tr in recent]))[0]
+        moved = np.array([self.predicted_box(tr, frame, pred[tr.track_id]) for tr in recent])
+        last = np.array([tr.last.box2d for tr in recent], dtype=float)
+        iou = np.maximum(box_iou(np.array([box]), moved)[0], box_iou(np.array([box]), last)[0])
         b = int(np.argmax(iou))
         return recent[b] if iou[b] >= cfg.join_iou else None
 
