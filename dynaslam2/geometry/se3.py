@@ -61,14 +61,22 @@ def so3_log(R: np.ndarray) -> np.ndarray:
     return w
 
 
-def _left_jacobian(w: np.ndarray) -> np.ndarray:
+def so3_left_jacobian(w: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) left Jacobian of SO(3) at (..., 3) rotation vectors: Exp(w + d) ~ Exp(J_l d) Exp(w)
+    (series below 1e-4 rad, where the closed form loses digits)."""
     theta = np.linalg.norm(w, axis=-1)[..., None, None]
     K = hat(w)
-    small = theta < 1e-8
+    small = theta < 1e-4
     t = np.where(small, 1.0, theta)
     a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
     b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
     return np.eye(3) + a * K + b * (K @ K)
+
+
+def so3_right_jacobian(w: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) right Jacobian: Exp(w + d) ~ Exp(w) Exp(J_r d), J_r(w) = J_l(-w) (gtsam's
+    Rot3.ExpmapDerivative)."""
+    return so3_left_jacobian(-np.asarray(w))
 
 
 def se3_exp(xi: np.ndarray) -> np.ndarray:
@@ -77,7 +85,7 @@ def se3_exp(xi: np.ndarray) -> np.ndarray:
     rho, phi = xi[..., :3], xi[..., 3:]
     T = np.zeros(xi.shape[:-1] + (4, 4))
     T[..., :3, :3] = so3_exp(phi)
-    T[..., :3, 3] = np.einsum("...ij,...j->...i", _left_jacobian(phi), rho)
+    T[..., :3, 3] = np.einsum("...ij,...j->...i", so3_left_jacobian(phi), rho)
     T[..., 3, 3] = 1.0
     return T
 
@@ -86,7 +94,7 @@ def se3_log(T: np.ndarray) -> np.ndarray:
     """(..., 4, 4) poses -> (..., 6) twists (rho, phi)."""
     T = np.asarray(T, dtype=float)
     phi = so3_log(T[..., :3, :3])
-    rho = np.linalg.solve(_left_jacobian(phi), T[..., :3, 3][..., None])[..., 0]
+    rho = np.linalg.solve(so3_left_jacobian(phi), T[..., :3, 3][..., None])[..., 0]
     return np.concatenate([rho, phi], -1)
 
 

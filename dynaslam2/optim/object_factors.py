@@ -20,7 +20,7 @@ import gtsam
 import numpy as np
 
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import hat, so3_exp
+from dynaslam2.geometry.se3 import hat, so3_exp, so3_right_jacobian
 from dynaslam2.optim.reprojection import huber_cost
 
 
@@ -153,18 +153,6 @@ def motion_factor(
         return (e * s).ravel()
 
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3 * n), all_keys, error)
-
-
-def so3_right_jacobian(w: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) right Jacobian of SO(3) at (..., 3) rotation vectors: Exp(w + d) ~ Exp(w) Exp(J_r d)
-    (gtsam's Rot3.ExpmapDerivative), vectorized."""
-    theta = np.linalg.norm(w, axis=-1)[..., None, None]
-    K = hat(w)
-    small = theta < 1e-4
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
-    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
-    return np.eye(3) - a * K + b * (K @ K)
 
 
 def _adjoints(T: np.ndarray) -> np.ndarray:
