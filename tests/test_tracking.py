@@ -154,26 +154,6 @@ def test_tracks_first_frames_against_kitti_ground_truth():
     assert est3.n_static_matches >= 100
 
 
-@pytest.mark.parametrize("t", [[0.01, 0.02, -1.2], [1.0, 0.0, 0.05], [0.3, 0.1, 0.5], [0.0, 0.0, 1.0]])
-def test_epipolar_pairs_equal_the_dense_test(t):
-    """The pencil-window candidate search returns exactly the pairs of the dense N1 x N2 check."""
-    from dynaslam2.geometry.se3 import hat
-    from dynaslam2.mapping.local_mapping import epipolar_pairs
-
-    rng = np.random.default_rng(3)
-    K = np.array([[700.0, 0, 600], [0, 710.0, 180], [0, 0, 1]])
-    T_2_1 = make_pose(so3_exp(np.array([0.001, 0.01, 0.002])), np.array(t))
-    x1 = np.column_stack([rng.uniform(0, 1226, 800), rng.uniform(0, 370, 800), np.ones(800)])
-    x2 = np.column_stack([rng.uniform(0, 1226, 900), rng.uniform(0, 370, 900), np.ones(900)])
-    th2 = 3.84 * 1.2 ** (2 * rng.integers(0, 8, 900))
-    a, b = epipolar_pairs(x1, x2, K, T_2_1, th2)
-    K_inv = np.linalg.inv(K)
-    L = x1 @ (K_inv.T @ hat(T_2_1[:3, 3]) @ T_2_1[:3, :3] @ K_inv).T
-    A, B = np.nonzero((L @ x2.T) ** 2 < th2[None, :] * (L[:, 0] ** 2 + L[:, 1] ** 2)[:, None])
-    assert len(A) > 1000
-    assert sorted(zip(a.tolist(), b.tolist())) == sorted(zip(A.tolist(), B.tolist()))
-
-
 def test_rgbd_frames_take_depth_from_the_depth_image():
     """No right image: depth at each keypoint from the depth image and a virtual right coordinate."""
     data = _textured_frame(None)
