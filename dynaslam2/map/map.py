@@ -167,9 +167,11 @@ class Map:
         self.points.n_obs[old_ids] = 0
         self.points.replaced_by[old_ids] = new_ids
 
-    def update_point_descriptors_and_normals(self, pt_ids: np.ndarray, scale_factors: np.ndarray) -> None:
+    def update_point_descriptors_and_normals(self, pt_ids: np.ndarray, scale_factors: np.ndarray,
+                                             descriptors: bool = True) -> None:
         """Representative descriptor, mean viewing direction and scale-invariance distances of
-        points (ORB-SLAM2's ComputeDistinctiveDescriptors + UpdateNormalAndDepth), vectorized."""
+        points (ORB-SLAM2's ComputeDistinctiveDescriptors + UpdateNormalAndDepth), vectorized;
+        `descriptors=False`: UpdateNormalAndDepth only (the descriptors depend on the observations alone)."""
         pt_ids = np.unique(np.asarray(pt_ids, dtype=np.int64))
         pt_ids = pt_ids[self.points.alive[pt_ids]]
         if len(pt_ids) == 0:
@@ -182,7 +184,7 @@ class Map:
         grp = local[self.obs.pt[rows]]
         kf_of_row = self.obs.kf[rows]
         kp_of_row = self.obs.kp[rows]
-        desc = np.empty((len(rows), 32), dtype=np.uint8)
+        desc = np.empty((len(rows) if descriptors else 0, 32), dtype=np.uint8)
         centers = np.empty((len(rows), 3))
         octave = np.empty(len(rows), dtype=np.int64)
         by_kf = np.argsort(kf_of_row, kind="stable")  # the rows of each keyframe: one slice of by_kf
@@ -190,12 +192,14 @@ class Map:
         for start, end in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
             r = by_kf[start:end]
             kf = self.keyframes[int(kf_of_row[r[0]])]
-            desc[r] = kf.keypoints.desc[kp_of_row[r]]
+            if descriptors:
+                desc[r] = kf.keypoints.desc[kp_of_row[r]]
             octave[r] = kf.keypoints.octave[kp_of_row[r]]
             centers[r] = kf.center_w
         has_obs = np.bincount(grp, minlength=len(pt_ids)) > 0
-        rep = distinctive_descriptors(grp, desc, len(pt_ids))
-        self.points.desc[pt_ids[has_obs]] = rep[has_obs]
+        if descriptors:
+            rep = distinctive_descriptors(grp, desc, len(pt_ids))
+            self.points.desc[pt_ids[has_obs]] = rep[has_obs]
         X = self.points.X_w[pt_ids]
         rays = X[grp] - centers
         rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-12)

@@ -421,7 +421,10 @@ class LocalMapper:
             map_.erase_observations(map_.keyframes[int(k)], obs_kp[m])
         dead = pts[map_.points.n_obs[pts] <= 0]
         map_.cull_points(dead)
-        map_.update_point_descriptors_and_normals(pts, self.scale_factors)
+        # As ORB-SLAM2: normals and distances of all moved points; a descriptor only changes with the
+        # observations, so only the points that lost some recompute theirs.
+        map_.update_point_descriptors_and_normals(np.unique(obs_pt[out]), self.scale_factors)
+        map_.update_point_descriptors_and_normals(pts, self.scale_factors, descriptors=False)
 
     # ------------------------------------------------------------ keyframe culling
     def cull_keyframes(self, kf: KeyFrame, map_: Map) -> None:
