@@ -2,12 +2,12 @@
 
 Per level: FAST (non-maximum suppression) at `ini_th_fast`; each cell of ORB-SLAM2's grid
 (~`cell_size` px) without a corner gets those of FAST at `min_th_fast` (ORB-SLAM2's two passes per
-cell, done as two whole-image passes, the second on a copy blanked outside the empty cells; see
-`_detect`). The survivors are spread with an adaptive uniform grid instead of ORB-SLAM2's octree:
-the largest square cell for which at least the level's budget of cells is occupied, the best response
-per cell, then the budget's best of those. Orientation is the intensity centroid (IC_Angle) on the
-level image; the rBRIEF descriptor is OpenCV's ORB on the Gaussian-blurred level (same pattern and
-blur as ORB-SLAM2). OpenCV 5.0 keeps the angle of provided keypoints (checked in the tests).
+cell: the second runs once on the empty cells stacked in a column; see `_detect`). The survivors are
+spread with an adaptive uniform grid instead of ORB-SLAM2's octree: the largest square cell for which
+at least the level's budget of cells is occupied, the best response per cell, then the budget's best
+of those. Orientation is the intensity centroid (IC_Angle) on the level image; the rBRIEF descriptor is
+OpenCV's ORB on the Gaussian-blurred level (same pattern and blur as ORB-SLAM2), computed on FAST's own
+keypoint objects. OpenCV 5.0 keeps the angle of provided keypoints (checked in the tests).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from itertools import repeat
 from operator import attrgetter
 
 import cv2
@@ -223,52 +224,65 @@ class ORBExtractor:
         left = self.extract(pyr_left, mask_left)
         return left, right.result()
 
-    def _fast(self, detector, img: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """FAST corners (non-maximum suppressed on the whole image, then kept where `mask` is non-zero,
-        in OpenCV before they become Python objects) as (xy, score) arrays."""
-        kps = detector.detect(img, mask)
-        if not kps:
-            return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
-        return cv2.KeyPoint.convert(kps), np.fromiter(map(attrgetter("response"), kps), np.float32, len(kps))
-
-    def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """FAST candidates (integer xy at this level, score) by ORB-SLAM2's per-cell rule: a cell keeps its
-        corners at ini_th_fast, or those at min_th_fast where it has none. FAST at ini_th_fast runs on
-        the level; FAST at min_th_fast runs on a copy where the cells that have corners are blanked except
-        a 4 px rim, so every pixel of an empty cell and its suppression neighbours see the true image (same
-        corners and scores as FAST on the whole level, for a fraction of the cost). Corners count only
-        >= edge_threshold inside the level and where `mask` (level 0) allows; FAST's own mask drops the
-        others."""
+    def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray]:
+        """FAST candidates by ORB-SLAM2's per-cell rule: a cell keeps its corners at ini_th_fast, or those at
+        min_th_fast where it has none. Same corners and scores as FAST on the whole level, for less work:
+        FAST at ini_th_fast runs on the level less its edge, FAST at min_th_fast once on a column of the cells
+        without a corner, each with the 4 px rim of true image that the scores (3 px radius) and the
+        non-maximum suppression (1 px more) of its corners read. Corners count only >= edge_threshold inside
+        the level and where `mask` (level 0) allows, in FAST's raster order.
+        Returns (the cv2 keypoints of the FAST calls, index of each candidate in them, integer xy at this
+        level, score); the keypoint objects are reused for the descriptors (`_describe`)."""
         cfg = self.cfg
         edge = cfg.edge_threshold
         h, w = img.shape
         border = edge - 3  # ORB-SLAM2's minBorderX: cells cover [border, size - border), corners >= 3 px inside
         if w - 2 * border < 7 or h - 2 * border < 7:
-            return np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+            return (), np.zeros(0, np.int64), np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
         n_cx = max(1, (w - 2 * border) // cfg.cell_size)
         n_cy = max(1, (h - 2 * border) // cfg.cell_size)
         cw = int(np.ceil((w - 2 * border) / n_cx))
         ch = int(np.ceil((h - 2 * border) / n_cy))
-        usable = np.zeros((h, w), np.uint8)
-        if mask is None:
-            usable[edge : h - edge, edge : w - edge] = 255
-        else:  # the level-0 pixel nearest to each level pixel (`level_to_base`)
-            col = np.clip(np.rint(level_to_base(np.arange(edge, w - edge, dtype=np.float64), scale_xy[0])).astype(np.int64), 0, mask.shape[1] - 1)
-            row = np.clip(np.rint(level_to_base(np.arange(edge, h - edge, dtype=np.float64), scale_xy[1])).astype(np.int64), 0, mask.shape[0] - 1)
-            usable[edge : h - edge, edge : w - edge] = mask[row[:, None], col[None, :]].view(np.uint8) * np.uint8(255)
 
-        xy, resp = self._fast(self._fast_ini, img, usable)
+        def usable(xy: np.ndarray) -> np.ndarray:
+            """Indices of the corners where `mask` allows (the level-0 pixel nearest to each, `level_to_base`)."""
+            if mask is None:
+                return np.arange(len(xy))
+            uv = np.rint(level_to_base(xy.astype(np.float64), scale_xy)).astype(np.int64)
+            return np.flatnonzero(mask[np.clip(uv[:, 1], 0, mask.shape[0] - 1), np.clip(uv[:, 0], 0, mask.shape[1] - 1)])
+
+        # The view from edge - 4: corners at >= edge keep their true suppression neighbours.
+        raw = self._fast_ini.detect(img[edge - 4 : h - edge + 4, edge - 4 : w - edge + 4])
+        xy = np.asarray(cv2.KeyPoint.convert(raw), np.float32).reshape(-1, 2) + np.float32(edge - 4)
+        src = np.flatnonzero((xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge))
+        src = src[usable(xy[src])]
+        xy, resp = xy[src], np.fromiter(map(attrgetter("response"), raw), np.float32, len(raw))[src]
         strong = np.zeros((n_cy, n_cx), bool)
-        cell = (xy.astype(np.int64) - edge) // (cw, ch)  # usable corners: inside the grid
+        cell = (xy.astype(np.int64) - edge) // (cw, ch)  # corners are inside the grid
         strong[cell[:, 1], cell[:, 0]] = True
         if strong.all():
-            return xy, resp
-        weak_cells = np.zeros((h, w), np.uint8)  # 255 on the cells without a strong corner
-        grid = np.repeat(np.repeat(~strong, ch, axis=0), cw, axis=1)[: h - 2 * edge, : w - 2 * edge]
-        weak_cells[edge : h - edge, edge : w - edge] = grid.view(np.uint8) * np.uint8(255)
-        weak_px = cv2.dilate(weak_cells, np.ones((9, 9), np.uint8))  # + 4 px rim of true image
-        xy_w, resp_w = self._fast(self._fast_min, cv2.bitwise_and(img, weak_px), cv2.bitwise_and(weak_cells, usable))
-        return np.concatenate([xy, xy_w]), np.concatenate([resp, resp_w])
+            return raw, src, xy, resp
+        # Second pass: the empty cells with their rims, stacked in one column.
+        rows, cols = np.nonzero(~strong)
+        x_cell, y_cell = edge + cols * cw, edge + rows * ch
+        ox = np.minimum(x_cell - 4, w - cw - 8)  # view origins; the last cells reach past w - edge: clamped
+        oy = np.minimum(y_cell - 4, h - ch - 8)
+        views = sliding_window_view(img, (ch + 8, cw + 8))[oy, ox]  # (n_empty, ch + 8, cw + 8)
+        raw_w = self._fast_min.detect(views.reshape(-1, cw + 8))
+        if not raw_w:
+            return raw, src, xy, resp
+        xy_w = cv2.KeyPoint.convert(raw_w)
+        view = xy_w[:, 1].astype(np.int64) // (ch + 8)
+        xy_w += np.stack([ox[view], oy[view] - view * (ch + 8)], axis=1).astype(np.float32)
+        inside = (
+            (xy_w[:, 0] >= x_cell[view]) & (xy_w[:, 0] < np.minimum(x_cell[view] + cw, w - edge))
+            & (xy_w[:, 1] >= y_cell[view]) & (xy_w[:, 1] < np.minimum(y_cell[view] + ch, h - edge))
+        )
+        src_w = np.flatnonzero(inside)
+        src_w = src_w[usable(xy_w[src_w])]
+        src_w = src_w[np.lexsort((xy_w[src_w, 0], xy_w[src_w, 1]))]  # FAST's raster order, as one whole-level pass
+        resp_w = np.fromiter(map(attrgetter("response"), raw_w), np.float32, len(raw_w))
+        return raw + raw_w, np.concatenate([src, src_w + len(raw)]), np.concatenate([xy, xy_w[src_w]]), np.concatenate([resp, resp_w[src_w]])
 
     def _angles(self, img: np.ndarray, xy: np.ndarray) -> np.ndarray:
         """Intensity-centroid orientation in degrees [0, 360) (ORB-SLAM2's IC_Angle)."""
@@ -282,32 +296,28 @@ class ORBExtractor:
         m_01 = np.einsum("ij,j->i", patches, self._w_v)
         return (np.degrees(np.arctan2(m_01, m_10)) % 360.0).astype(np.float32)
 
-    def _describe(self, level: int, img: np.ndarray, xy: np.ndarray, angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """rBRIEF descriptors on the blurred level (OpenCV's ORB); returns (kept indices, descriptors)."""
-        size = float(self.cfg.patch_size)
-        kps = [
-            cv2.KeyPoint(x, y, size, a, 0.0, 0, i)
-            for i, (x, y, a) in enumerate(zip(xy[:, 0].tolist(), xy[:, 1].tolist(), angle.tolist()))
-        ]
+    def _describe(self, img: np.ndarray, kps: list, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """rBRIEF descriptors on the blurred level (OpenCV's ORB) of the FAST keypoint objects `kps`, moved
+        to level coordinates `xy` and given `angle` (no keypoint is created in Python). All keypoints are
+        >= edge_threshold inside the level, so OpenCV keeps all of them, in order."""
+        list(map(setattr, kps, repeat("pt"), zip(xy[:, 0].tolist(), xy[:, 1].tolist())))
+        list(map(setattr, kps, repeat("angle"), angle.tolist()))
         kps_out, desc = self._orb.compute(img, kps)
-        if desc is None or not kps_out:
-            return np.zeros(0, np.int64), np.zeros((0, 32), np.uint8)
-        idx = np.fromiter(map(attrgetter("class_id"), kps_out), np.int64, len(kps_out))
-        return idx, desc
+        if len(kps_out) != len(kps):
+            raise RuntimeError(f"ORB dropped {len(kps) - len(kps_out)} of {len(kps)} keypoints inside the edge")
+        return desc
 
     def _extract_level(self, level: int, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, budget: int) -> Keypoints | None:
         """Keypoints of one level; `scale_xy` = (W / W_l, H / H_l) maps them to level 0 (`level_to_base`)."""
         if budget <= 0:
             return None
-        xy, resp = self._detect(img, scale_xy, mask)
+        raw, src, xy, resp = self._detect(img, scale_xy, mask)
         if len(xy) == 0:
             return None
         keep = spread_best(xy, resp, budget, float(img.shape[0] * img.shape[1]))
         keep.sort()
         xy, resp = xy[keep], resp[keep]
         angle = self._angles(img, xy)
-        idx, desc = self._describe(level, img, xy, angle)
-        order = np.argsort(idx, kind="stable")
-        idx, desc = idx[order], desc[order]
-        uv = level_to_base(xy[idx].astype(np.float64), scale_xy).astype(np.float32)
-        return Keypoints(uv, np.full(len(idx), level, np.int32), angle[idx], resp[idx], np.ascontiguousarray(desc))
+        desc = self._describe(img, [raw[i] for i in src[keep].tolist()], xy, angle)
+        uv = level_to_base(xy.astype(np.float64), scale_xy).astype(np.float32)
+        return Keypoints(uv, np.full(len(xy), level, np.int32), angle, resp, desc)
