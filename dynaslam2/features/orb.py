@@ -129,7 +129,8 @@ def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, area: float, 
     n = len(xy)
     if n <= n_keep:
         return np.arange(n)
-    order = np.argsort(-response, kind="stable")  # best first
+    score = response.astype(np.uint8)  # FAST scores are integers < 256: a radix sort
+    order = np.argsort(255 - score if np.array_equal(score, response) else -response, kind="stable")  # best first
     x = xy[order, 0].astype(np.float64)  # float32 -> float64 is exact: cell indices floor(x / cell)
     y = xy[order, 1].astype(np.float64)
     x_max, y_max = float(x.max()), float(y.max())
@@ -137,7 +138,10 @@ def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, area: float, 
     def cell_keys(cell: float) -> tuple[np.ndarray, int]:
         """Cell index of each point (row-major) and the number of cells of the grid."""
         stride = int(x_max / cell) + 1
-        return (y / cell).astype(np.int64) * stride + (x / cell).astype(np.int64), (int(y_max / cell) + 1) * stride
+        keys = (y / cell).astype(np.int64)
+        keys *= stride
+        keys += (x / cell).astype(np.int64)
+        return keys, (int(y_max / cell) + 1) * stride
 
     # A grid of 2*sqrt(area/n_keep) cells has < n_keep cells: an upper bound; 1 px cells: n occupied.
     lo, hi = 1.0, 2.0 * np.sqrt(area / n_keep)
@@ -150,7 +154,9 @@ def spread_best(xy: np.ndarray, response: np.ndarray, n_keep: int, area: float, 
             lo = mid
         else:
             hi = mid
-    keys, _ = cell_keys(lo)
+    keys, n_cells = cell_keys(lo)
+    if n_cells <= 1 << 16:
+        keys = keys.astype(np.uint16)  # a radix sort
     by_key = np.argsort(keys, kind="stable")  # within a cell: best response first
     k_sorted = keys[by_key]
     winners = by_key[np.r_[True, k_sorted[1:] != k_sorted[:-1]]]
@@ -207,8 +213,21 @@ class ORBExtractor:
                 raise InputError(f"n_features: expected a positive integer, got {n_features}")
             budgets = level_budgets(int(n_features), self.n_levels, self.cfg.scale_factor)
         scales = level_scales(pyramid)
-        parts = [self._extract_level(level, pyramid[level], scales[level], mask, int(budgets[level])) for level in range(self.n_levels)]
-        return Keypoints.concatenate([p for p in parts if p is not None])
+        raw: list = []  # FAST's keypoint objects of all levels
+        parts = []  # per level: (index in raw, xy, response, level) of the spread candidates
+        for lv in np.flatnonzero(budgets > 0).tolist():
+            raw_l, src_l, xy_l, resp_l = self._detect(pyramid[lv], scales[lv], mask)
+            keep = spread_best(xy_l, resp_l, int(budgets[lv]), float(pyramid[lv].shape[0] * pyramid[lv].shape[1]))
+            keep.sort()
+            parts.append((src_l[keep] + len(raw), xy_l[keep], resp_l[keep], np.full(len(keep), lv, np.int32)))
+            raw.extend(raw_l)
+        if not parts:
+            return Keypoints.empty()
+        src, xy, resp, level = (np.concatenate(a) for a in zip(*parts))
+        angle = self._angles(pyramid, xy, level)
+        desc = self._describe(pyramid, list(map(raw.__getitem__, src.tolist())), xy, level, angle)
+        uv = level_to_base(xy.astype(np.float64), scales[level]).astype(np.float32)
+        return Keypoints(uv, level, angle, resp, desc)
 
     def extract_pair(
         self, pyr_left: list[np.ndarray], pyr_right: list[np.ndarray], mask_left: np.ndarray | None = None, n_features_right: int | None = None
@@ -244,18 +263,17 @@ class ORBExtractor:
         cw = int(np.ceil((w - 2 * border) / n_cx))
         ch = int(np.ceil((h - 2 * border) / n_cy))
 
-        def usable(xy: np.ndarray) -> np.ndarray:
-            """Indices of the corners where `mask` allows (the level-0 pixel nearest to each, `level_to_base`)."""
+        def usable(idx: np.ndarray, xy: np.ndarray) -> np.ndarray:
+            """The corners `idx` of `xy` where `mask` allows (the level-0 pixel nearest to each, `level_to_base`)."""
             if mask is None:
-                return np.arange(len(xy))
-            uv = np.rint(level_to_base(xy.astype(np.float64), scale_xy)).astype(np.int64)
-            return np.flatnonzero(mask[np.clip(uv[:, 1], 0, mask.shape[0] - 1), np.clip(uv[:, 0], 0, mask.shape[1] - 1)])
+                return idx
+            uv = np.rint(level_to_base(xy[idx].astype(np.float64), scale_xy)).astype(np.int64)
+            return idx[mask[np.clip(uv[:, 1], 0, mask.shape[0] - 1), np.clip(uv[:, 0], 0, mask.shape[1] - 1)]]
 
         # The view from edge - 4: corners at >= edge keep their true suppression neighbours.
         raw = self._fast_ini.detect(img[edge - 4 : h - edge + 4, edge - 4 : w - edge + 4])
         xy = np.asarray(cv2.KeyPoint.convert(raw), np.float32).reshape(-1, 2) + np.float32(edge - 4)
-        src = np.flatnonzero((xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge))
-        src = src[usable(xy[src])]
+        src = usable(np.flatnonzero((xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)), xy)
         xy, resp = xy[src], np.fromiter(map(attrgetter("response"), raw), np.float32, len(raw))[src]
         strong = np.zeros((n_cy, n_cx), bool)
         cell = (xy.astype(np.int64) - edge) // (cw, ch)  # corners are inside the grid
@@ -268,7 +286,9 @@ class ORBExtractor:
         ox = np.minimum(x_cell - 4, w - cw - 8)  # view origins; the last cells reach past w - edge: clamped
         oy = np.minimum(y_cell - 4, h - ch - 8)
         views = sliding_window_view(img, (ch + 8, cw + 8))[oy, ox]  # (n_empty, ch + 8, cw + 8)
-        raw_w = self._fast_min.detect(views.reshape(-1, cw + 8))
+        rimless = np.zeros((ch + 8, cw + 8), np.uint8)
+        rimless[4:-4, 4:-4] = 255  # FAST's mask: no corner object for the rims (the clamped cells: checked below)
+        raw_w = self._fast_min.detect(views.reshape(-1, cw + 8), np.tile(rimless, (len(rows), 1)))
         if not raw_w:
             return raw, src, xy, resp
         xy_w = cv2.KeyPoint.convert(raw_w)
@@ -278,46 +298,40 @@ class ORBExtractor:
             (xy_w[:, 0] >= x_cell[view]) & (xy_w[:, 0] < np.minimum(x_cell[view] + cw, w - edge))
             & (xy_w[:, 1] >= y_cell[view]) & (xy_w[:, 1] < np.minimum(y_cell[view] + ch, h - edge))
         )
-        src_w = np.flatnonzero(inside)
-        src_w = src_w[usable(xy_w[src_w])]
+        src_w = usable(np.flatnonzero(inside), xy_w)
         src_w = src_w[np.lexsort((xy_w[src_w, 0], xy_w[src_w, 1]))]  # FAST's raster order, as one whole-level pass
         resp_w = np.fromiter(map(attrgetter("response"), raw_w), np.float32, len(raw_w))
         return raw + raw_w, np.concatenate([src, src_w + len(raw)]), np.concatenate([xy, xy_w[src_w]]), np.concatenate([resp, resp_w[src_w]])
 
-    def _angles(self, img: np.ndarray, xy: np.ndarray) -> np.ndarray:
-        """Intensity-centroid orientation in degrees [0, 360) (ORB-SLAM2's IC_Angle)."""
-        windows = sliding_window_view(img, (2 * HALF_PATCH + 1, 2 * HALF_PATCH + 1))
-        ix = xy[:, 0].astype(np.int64) - HALF_PATCH
-        iy = xy[:, 1].astype(np.int64) - HALF_PATCH
-        patches = windows[iy, ix].reshape(len(xy), -1).astype(np.float32)
+    def _angles(self, pyramid: list[np.ndarray], xy: np.ndarray, level: np.ndarray) -> np.ndarray:
+        """Intensity-centroid orientation in degrees [0, 360) (ORB-SLAM2's IC_Angle) of integer `xy` on their
+        levels (`level` sorted)."""
+        size = 2 * HALF_PATCH + 1
+        patches = np.empty((len(xy), size, size), np.uint8)
+        corner = xy.astype(np.int64) - HALF_PATCH
+        bounds = np.searchsorted(level, np.arange(self.n_levels + 1))
+        for lv in np.flatnonzero(np.diff(bounds)).tolist():
+            s, e = bounds[lv], bounds[lv + 1]
+            patches[s:e] = sliding_window_view(pyramid[lv], (size, size))[corner[s:e, 1], corner[s:e, 0]]
+        patches = patches.reshape(len(xy), -1).astype(np.float32)
         # Integer moments below 2**24: exact in float32 in any summation order. einsum, not BLAS:
         # a multithreaded gemv stalls on a loaded machine (measured 30x slower at 1000 keypoints).
         m_10 = np.einsum("ij,j->i", patches, self._w_u)
         m_01 = np.einsum("ij,j->i", patches, self._w_v)
         return (np.degrees(np.arctan2(m_01, m_10)) % 360.0).astype(np.float32)
 
-    def _describe(self, img: np.ndarray, kps: list, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
-        """rBRIEF descriptors on the blurred level (OpenCV's ORB) of the FAST keypoint objects `kps`, moved
-        to level coordinates `xy` and given `angle` (no keypoint is created in Python). All keypoints are
-        >= edge_threshold inside the level, so OpenCV keeps all of them, in order."""
+    def _describe(self, pyramid: list[np.ndarray], kps: list, xy: np.ndarray, level: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """rBRIEF descriptors on the blurred levels (OpenCV's ORB, one call per level; `level` sorted) of the
+        FAST keypoint objects `kps`, moved to their level coordinates `xy` and given `angle` (no keypoint is
+        built in Python). All keypoints are >= edge_threshold inside their level: OpenCV keeps them in order."""
         list(map(setattr, kps, repeat("pt"), zip(xy[:, 0].tolist(), xy[:, 1].tolist())))
         list(map(setattr, kps, repeat("angle"), angle.tolist()))
-        kps_out, desc = self._orb.compute(img, kps)
-        if len(kps_out) != len(kps):
-            raise RuntimeError(f"ORB dropped {len(kps) - len(kps_out)} of {len(kps)} keypoints inside the edge")
+        desc = np.empty((len(kps), 32), np.uint8)
+        bounds = np.searchsorted(level, np.arange(self.n_levels + 1))
+        for lv in np.flatnonzero(np.diff(bounds)).tolist():
+            s, e = bounds[lv], bounds[lv + 1]
+            kps_out, desc_l = self._orb.compute(pyramid[lv], kps[s:e])
+            if len(kps_out) != e - s:
+                raise RuntimeError(f"ORB dropped {e - s - len(kps_out)} of {e - s} keypoints inside the edge")
+            desc[s:e] = desc_l
         return desc
-
-    def _extract_level(self, level: int, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, budget: int) -> Keypoints | None:
-        """Keypoints of one level; `scale_xy` = (W / W_l, H / H_l) maps them to level 0 (`level_to_base`)."""
-        if budget <= 0:
-            return None
-        raw, src, xy, resp = self._detect(img, scale_xy, mask)
-        if len(xy) == 0:
-            return None
-        keep = spread_best(xy, resp, budget, float(img.shape[0] * img.shape[1]))
-        keep.sort()
-        xy, resp = xy[keep], resp[keep]
-        angle = self._angles(img, xy)
-        desc = self._describe(img, [raw[i] for i in src[keep].tolist()], xy, angle)
-        uv = level_to_base(xy.astype(np.float64), scale_xy).astype(np.float32)
-        return Keypoints(uv, np.full(len(xy), level, np.int32), angle, resp, desc)
