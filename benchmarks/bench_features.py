@@ -8,6 +8,7 @@ Each cell: median wall ms, min wall ms, [median process CPU ms] (both cores coun
 machine the min is the best estimate of the uncontended cost.
 Columns: pyramid (both images), extract (left then right, one thread), pair (extract_pair: right image
 in a worker thread), stereo (match_stereo), frame = pyramid + pair + stereo.
+Then the stages of one `extract` of the left image (`timing_ms`): median and min wall ms.
 """
 
 from __future__ import annotations
@@ -97,6 +98,7 @@ def main() -> None:
     print(f"cv2 threads={cv2.getNumThreads()}, n_features={args.n_features}, right={n_right}; ms: median wall, min wall [median cpu]")
     header = ("image", "pyramid", "extract", "pair", "stereo", "frame")
     print(f"{header[0]:>22} " + " ".join(f"{h:>20}" for h in header[1:]) + "   n_kp  depth%")
+    stages = []
     for name, left, right, camera in _pairs():
         pyr_l, pyr_r = extractor.build_pyramid(left), extractor.build_pyramid(right)
         kp_l, kp_r = extractor.extract_pair(pyr_l, pyr_r, n_features_right=n_right)
@@ -112,6 +114,19 @@ def main() -> None:
         _, depth = stereo()
         cells = " ".join(f"{w:6.1f} {m:5.1f} [{c:5.1f}]" for w, m, c in (t_pyr, t_ext, t_pair, t_st, t_frame))
         print(f"{name:>22} {cells} {len(kp_l):6d} {100 * np.mean(depth > 0):6.1f}%")
+        stages.append((name, _stage_ms(extractor, pyr_l, args.repeat)))
+    for name, ms in stages:
+        print(f"{name:>22} stages of extract (left), median/min ms: " + ", ".join(f"{k} {m:.1f}/{n:.1f}" for k, (m, n) in ms.items()))
+
+
+def _stage_ms(extractor: ORBExtractor, pyramid: list[np.ndarray], repeat: int) -> dict[str, tuple[float, float]]:
+    """Per stage of `extract`: (median, min) wall ms over `repeat` runs."""
+    runs = []
+    for _ in range(repeat):
+        timing: dict[str, float] = {}
+        extractor.extract(pyramid, timing_ms=timing)
+        runs.append(timing)
+    return {k: (float(np.median([r[k] for r in runs])), float(np.min([r[k] for r in runs]))) for k in runs[0]}
 
 
 if __name__ == "__main__":

@@ -182,6 +182,15 @@ def test_extraction_deterministic(kitti_left, extractor):
         np.testing.assert_array_equal(getattr(kp, name), getattr(kp2, name))
 
 
+def test_extract_reports_stage_timings(kitti_left, extractor):
+    _, pyr, kp = kitti_left
+    timing: dict[str, float] = {}
+    kp2 = extractor.extract(pyr, timing_ms=timing)
+    assert set(timing) == {"fast", "spread", "orientation", "descriptors"}
+    assert all(v > 0 for v in timing.values()), timing
+    np.testing.assert_array_equal(kp2.desc, kp.desc)
+
+
 def test_extract_pair_threads_and_budget_override(kitti_left):
     img, pyr, kp = kitti_left
     pyr_r = ORBExtractor(ORBConfig()).build_pyramid(_kitti("image_1"))

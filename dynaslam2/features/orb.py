@@ -13,6 +13,7 @@ keypoint objects. OpenCV 5.0 keeps the angle of provided keypoints (checked in t
 from __future__ import annotations
 
 import os
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from itertools import repeat
@@ -196,10 +197,13 @@ class ORBExtractor:
             pyramid.append(cv2.resize(pyramid[-1], size, interpolation=cv2.INTER_LINEAR))
         return pyramid
 
-    def extract(self, pyramid: list[np.ndarray], mask: np.ndarray | None = None, n_features: int | None = None) -> Keypoints:
+    def extract(
+        self, pyramid: list[np.ndarray], mask: np.ndarray | None = None, n_features: int | None = None, timing_ms: dict[str, float] | None = None
+    ) -> Keypoints:
         """Distributed ORB keypoints of all levels. `mask` (HxW bool/uint8 at level 0, True/non-zero = usable)
         removes candidates before the distribution, so the budget goes to the usable area. `n_features`
-        overrides the configured budget (e.g. more features on the right image of a stereo pair)."""
+        overrides the configured budget (e.g. more features on the right image of a stereo pair).
+        `timing_ms`, when given, receives the wall ms of the stages: fast, spread, orientation, descriptors."""
         if len(pyramid) != self.n_levels:
             raise InputError(f"pyramid: expected {self.n_levels} levels, got {len(pyramid)}")
         if mask is not None:
@@ -215,17 +219,26 @@ class ORBExtractor:
         scales = level_scales(pyramid)
         raw: list = []  # FAST's keypoint objects of all levels
         parts = []  # per level: (index in raw, xy, response, level) of the spread candidates
+        t_fast = t_spread = 0.0
         for lv in np.flatnonzero(budgets > 0).tolist():
+            t0 = time.perf_counter()
             raw_l, src_l, xy_l, resp_l = self._detect(pyramid[lv], scales[lv], mask)
+            t1 = time.perf_counter()
             keep = spread_best(xy_l, resp_l, int(budgets[lv]), float(pyramid[lv].shape[0] * pyramid[lv].shape[1]))
             keep.sort()
             parts.append((src_l[keep] + len(raw), xy_l[keep], resp_l[keep], np.full(len(keep), lv, np.int32)))
             raw.extend(raw_l)
+            t_fast, t_spread = t_fast + t1 - t0, t_spread + time.perf_counter() - t1
         if not parts:
             return Keypoints.empty()
         src, xy, resp, level = (np.concatenate(a) for a in zip(*parts))
+        t0 = time.perf_counter()
         angle = self._angles(pyramid, xy, level)
+        t1 = time.perf_counter()
         desc = self._describe(pyramid, list(map(raw.__getitem__, src.tolist())), xy, level, angle)
+        if timing_ms is not None:
+            stages = {"fast": t_fast, "spread": t_spread, "orientation": t1 - t0, "descriptors": time.perf_counter() - t1}
+            timing_ms.update({k: 1e3 * v for k, v in stages.items()})
         uv = level_to_base(xy.astype(np.float64), scales[level]).astype(np.float32)
         return Keypoints(uv, level, angle, resp, desc)
 
