@@ -93,12 +93,19 @@ def test_extraction_spreads_over_image_unlike_plain_orb(kitti_left):
     assert ours_fine > plain_fine + 0.1, (ours_fine, plain_fine)
 
 
-def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor):
+@pytest.mark.parametrize("masked", [False, True])
+def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor, masked):
     """The candidates are exactly ORB-SLAM2's rule computed from one FAST pass at min_th_fast: a cell
-    keeps its corners scoring >= ini_th_fast, or all its corners where it has none."""
+    keeps its corners scoring >= ini_th_fast, or all its corners where it has none. With a mask, the
+    rule applies to the corners whose nearest level-0 pixel is usable."""
     cfg = extractor.cfg
     fast = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
-    _, pyr, _ = kitti_left
+    img0, pyr, _ = kitti_left
+    mask = None
+    if masked:  # a blob of unusable pixels that empties some cells and cuts through others
+        yy, xx = np.mgrid[0 : img0.shape[0], 0 : img0.shape[1]]
+        mask = (xx - 500.0) ** 2 + ((yy - 200.0) * 2.5) ** 2 > 230.0**2
+    scales = level_scales(pyr)
     n_fallback = 0
     for level in range(len(pyr)):  # all levels: the last cells of a row or column reach past the edge
         img = pyr[level]
@@ -109,6 +116,10 @@ def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor):
         e = cfg.edge_threshold
         inside = (xy[:, 0] >= e) & (xy[:, 0] < w - e) & (xy[:, 1] >= e) & (xy[:, 1] < h - e)
         xy, score = xy[inside], score[inside]
+        if masked:
+            uv = np.rint(level_to_base(xy.astype(np.float64), scales[level])).astype(int)
+            usable = mask[np.clip(uv[:, 1], 0, img0.shape[0] - 1), np.clip(uv[:, 0], 0, img0.shape[1] - 1)]
+            xy, score = xy[usable], score[usable]
         n_cx, n_cy = (w - 2 * (e - 3)) // cfg.cell_size, (h - 2 * (e - 3)) // cfg.cell_size
         cw, ch = int(np.ceil((w - 2 * (e - 3)) / n_cx)), int(np.ceil((h - 2 * (e - 3)) / n_cy))
         cell = np.minimum((xy[:, 1].astype(int) - e) // ch, n_cy - 1) * n_cx + np.minimum((xy[:, 0].astype(int) - e) // cw, n_cx - 1)
@@ -116,7 +127,7 @@ def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor):
         keep = strong | ~np.isin(cell, cell[strong])
         n_fallback += (~strong & keep).sum()
         expected = {(x, y, s) for (x, y), s in zip(xy[keep].tolist(), score[keep].tolist())}
-        _, _, got_xy, got_score = extractor._detect(img, level_scales(pyr)[level], None)
+        _, _, got_xy, got_score = extractor._detect(img, scales[level], mask)
         assert {(x, y, s) for (x, y), s in zip(got_xy.tolist(), got_score.tolist())} == expected
     assert n_fallback > 0  # the test covers cells that fall back to min_th_fast
 
