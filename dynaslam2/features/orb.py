@@ -2,7 +2,8 @@
 
 Per level: FAST (non-maximum suppression) at `ini_th_fast`; each cell of ORB-SLAM2's grid
 (~`cell_size` px) without a corner gets those of FAST at `min_th_fast` (ORB-SLAM2's two passes per
-cell: the second runs once on the empty cells stacked in a column; see `_detect`). The survivors are
+cell, done as two whole-level passes, the second on a copy blanked outside the empty cells; see
+`_detect`). Each level is processed to the end before the next (its image stays in cache). The survivors are
 spread with an adaptive uniform grid instead of ORB-SLAM2's octree: the largest square cell for which
 at least the level's budget of cells is occupied, the best response per cell, then the budget's best
 of those. Orientation is the intensity centroid (IC_Angle) on the level image; the rBRIEF descriptor is
@@ -217,30 +218,19 @@ class ORBExtractor:
                 raise InputError(f"n_features: expected a positive integer, got {n_features}")
             budgets = level_budgets(int(n_features), self.n_levels, self.cfg.scale_factor)
         scales = level_scales(pyramid)
-        raw: list = []  # FAST's keypoint objects of all levels
-        parts = []  # per level: (index in raw, xy, response, level) of the spread candidates
-        t_fast = t_spread = 0.0
-        for lv in np.flatnonzero(budgets > 0).tolist():
-            t0 = time.perf_counter()
-            raw_l, src_l, xy_l, resp_l = self._detect(pyramid[lv], scales[lv], mask)
-            t1 = time.perf_counter()
-            keep = spread_best(xy_l, resp_l, int(budgets[lv]), float(pyramid[lv].shape[0] * pyramid[lv].shape[1]))
-            keep.sort()
-            parts.append((src_l[keep] + len(raw), xy_l[keep], resp_l[keep], np.full(len(keep), lv, np.int32)))
-            raw.extend(raw_l)
-            t_fast, t_spread = t_fast + t1 - t0, t_spread + time.perf_counter() - t1
+        parts = []
+        stages = dict.fromkeys(("fast", "spread", "orientation", "descriptors"), 0.0)
+        for lv in np.flatnonzero(budgets > 0).tolist():  # one level at a time: its image stays in cache
+            part = self._extract_level(pyramid[lv], scales[lv], mask, int(budgets[lv]), stages)
+            if part is not None:
+                parts.append((lv, part))
+        if timing_ms is not None:
+            timing_ms.update({k: 1e3 * v for k, v in stages.items()})
         if not parts:
             return Keypoints.empty()
-        src, xy, resp, level = (np.concatenate(a) for a in zip(*parts))
-        t0 = time.perf_counter()
-        angle = self._angles(pyramid, xy, level)
-        t1 = time.perf_counter()
-        desc = self._describe(pyramid, list(map(raw.__getitem__, src.tolist())), xy, level, angle)
-        if timing_ms is not None:
-            stages = {"fast": t_fast, "spread": t_spread, "orientation": t1 - t0, "descriptors": time.perf_counter() - t1}
-            timing_ms.update({k: 1e3 * v for k, v in stages.items()})
-        uv = level_to_base(xy.astype(np.float64), scales[level]).astype(np.float32)
-        return Keypoints(uv, level, angle, resp, desc)
+        return Keypoints.concatenate([Keypoints(level_to_base(xy.astype(np.float64), scales[lv]).astype(np.float32),
+                                                np.full(len(xy), lv, np.int32), angle, resp, desc)
+                                      for lv, (xy, angle, resp, desc) in parts])
 
     def extract_pair(
         self, pyr_left: list[np.ndarray], pyr_right: list[np.ndarray], mask_left: np.ndarray | None = None, n_features_right: int | None = None
@@ -258,11 +248,11 @@ class ORBExtractor:
 
     def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray]:
         """FAST candidates by ORB-SLAM2's per-cell rule: a cell keeps its corners at ini_th_fast, or those at
-        min_th_fast where it has none. Same corners and scores as FAST on the whole level, for less work:
-        FAST at ini_th_fast runs on the level less its edge, FAST at min_th_fast once on a column of the cells
-        without a corner, each with the 4 px rim of true image that the scores (3 px radius) and the
-        non-maximum suppression (1 px more) of its corners read. Corners count only >= edge_threshold inside
-        the level and where `mask` (level 0) allows, in FAST's raster order.
+        min_th_fast where it has none. Same corners and scores as FAST on the whole level: FAST at ini_th_fast
+        runs on the level less its edge, FAST at min_th_fast on a copy blanked outside the cells without a
+        corner, except the 4 px rim that the scores (3 px radius) and the non-maximum suppression (1 px more)
+        of their corners read. Corners count only >= edge_threshold inside the level and where `mask`
+        (level 0) allows, in FAST's raster order (strong, then fallback).
         Returns (the cv2 keypoints of the FAST calls, index of each candidate in them, integer xy at this
         level, score); the keypoint objects are reused for the descriptors (`_describe`)."""
         cfg = self.cfg
@@ -293,58 +283,60 @@ class ORBExtractor:
         strong[cell[:, 1], cell[:, 0]] = True
         if strong.all():
             return raw, src, xy, resp
-        # Second pass: the empty cells with their rims, stacked in one column.
-        rows, cols = np.nonzero(~strong)
-        x_cell, y_cell = edge + cols * cw, edge + rows * ch
-        ox = np.minimum(x_cell - 4, w - cw - 8)  # view origins; the last cells reach past w - edge: clamped
-        oy = np.minimum(y_cell - 4, h - ch - 8)
-        views = sliding_window_view(img, (ch + 8, cw + 8))[oy, ox]  # (n_empty, ch + 8, cw + 8)
-        rimless = np.zeros((ch + 8, cw + 8), np.uint8)
-        rimless[4:-4, 4:-4] = 255  # FAST's mask: no corner object for the rims (the clamped cells: checked below)
-        raw_w = self._fast_min.detect(views.reshape(-1, cw + 8), np.tile(rimless, (len(rows), 1)))
+        # Second pass on a copy blanked outside the empty cells except a 4 px rim (all that the scores and
+        # the suppression of their corners read); FAST's mask keeps the corners inside the empty cells.
+        weak_cells = np.zeros((h, w), np.uint8)
+        grid = np.repeat(np.repeat(~strong, ch, axis=0), cw, axis=1)[: h - 2 * edge, : w - 2 * edge]
+        weak_cells[edge : h - edge, edge : w - edge] = grid.view(np.uint8) * np.uint8(255)
+        raw_w = self._fast_min.detect(cv2.bitwise_and(img, cv2.dilate(weak_cells, np.ones((9, 9), np.uint8))), weak_cells)
         if not raw_w:
             return raw, src, xy, resp
         xy_w = cv2.KeyPoint.convert(raw_w)
-        view = xy_w[:, 1].astype(np.int64) // (ch + 8)
-        xy_w += np.stack([ox[view], oy[view] - view * (ch + 8)], axis=1).astype(np.float32)
-        inside = (
-            (xy_w[:, 0] >= x_cell[view]) & (xy_w[:, 0] < np.minimum(x_cell[view] + cw, w - edge))
-            & (xy_w[:, 1] >= y_cell[view]) & (xy_w[:, 1] < np.minimum(y_cell[view] + ch, h - edge))
-        )
-        src_w = usable(np.flatnonzero(inside), xy_w)
-        src_w = src_w[np.lexsort((xy_w[src_w, 0], xy_w[src_w, 1]))]  # FAST's raster order, as one whole-level pass
+        src_w = usable(np.arange(len(raw_w)), xy_w)
         resp_w = np.fromiter(map(attrgetter("response"), raw_w), np.float32, len(raw_w))
         return raw + raw_w, np.concatenate([src, src_w + len(raw)]), np.concatenate([xy, xy_w[src_w]]), np.concatenate([resp, resp_w[src_w]])
 
-    def _angles(self, pyramid: list[np.ndarray], xy: np.ndarray, level: np.ndarray) -> np.ndarray:
-        """Intensity-centroid orientation in degrees [0, 360) (ORB-SLAM2's IC_Angle) of integer `xy` on their
-        levels (`level` sorted)."""
-        size = 2 * HALF_PATCH + 1
-        patches = np.empty((len(xy), size, size), np.uint8)
-        corner = xy.astype(np.int64) - HALF_PATCH
-        bounds = np.searchsorted(level, np.arange(self.n_levels + 1))
-        for lv in np.flatnonzero(np.diff(bounds)).tolist():
-            s, e = bounds[lv], bounds[lv + 1]
-            patches[s:e] = sliding_window_view(pyramid[lv], (size, size))[corner[s:e, 1], corner[s:e, 0]]
-        patches = patches.reshape(len(xy), -1).astype(np.float32)
+    def _extract_level(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, budget: int, stages: dict[str, float]):
+        """(xy at this level, angle, response, descriptors) of one level's spread keypoints, or None; adds the
+        seconds of each stage to `stages`."""
+        t0 = time.perf_counter()
+        raw, src, xy, resp = self._detect(img, scale_xy, mask)
+        t1 = time.perf_counter()
+        stages["fast"] += t1 - t0
+        if len(xy) == 0:
+            return None
+        keep = spread_best(xy, resp, budget, float(img.shape[0] * img.shape[1]))
+        keep.sort()
+        kps = list(map(raw.__getitem__, src[keep].tolist()))
+        xy, resp = xy[keep], resp[keep]
+        t2 = time.perf_counter()
+        angle = self._angles(img, xy)
+        t3 = time.perf_counter()
+        desc = self._describe(img, kps, xy, angle)
+        stages["spread"] += t2 - t1
+        stages["orientation"] += t3 - t2
+        stages["descriptors"] += time.perf_counter() - t3
+        return xy, angle, resp, desc
+
+    def _angles(self, img: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """Intensity-centroid orientation in degrees [0, 360) (ORB-SLAM2's IC_Angle) of integer `xy`."""
+        windows = sliding_window_view(img, (2 * HALF_PATCH + 1, 2 * HALF_PATCH + 1))
+        ix = xy[:, 0].astype(np.int64) - HALF_PATCH
+        iy = xy[:, 1].astype(np.int64) - HALF_PATCH
+        patches = windows[iy, ix].reshape(len(xy), -1).astype(np.float32)
         # Integer moments below 2**24: exact in float32 in any summation order. einsum, not BLAS:
         # a multithreaded gemv stalls on a loaded machine (measured 30x slower at 1000 keypoints).
         m_10 = np.einsum("ij,j->i", patches, self._w_u)
         m_01 = np.einsum("ij,j->i", patches, self._w_v)
         return (np.degrees(np.arctan2(m_01, m_10)) % 360.0).astype(np.float32)
 
-    def _describe(self, pyramid: list[np.ndarray], kps: list, xy: np.ndarray, level: np.ndarray, angle: np.ndarray) -> np.ndarray:
-        """rBRIEF descriptors on the blurred levels (OpenCV's ORB, one call per level; `level` sorted) of the
-        FAST keypoint objects `kps`, moved to their level coordinates `xy` and given `angle` (no keypoint is
-        built in Python). All keypoints are >= edge_threshold inside their level: OpenCV keeps them in order."""
+    def _describe(self, img: np.ndarray, kps: list, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """rBRIEF descriptors on the blurred level (OpenCV's ORB) of FAST's own keypoint objects `kps`, moved
+        to level coordinates `xy` and given `angle` (no keypoint is built in Python). All keypoints are
+        >= edge_threshold inside the level: OpenCV keeps them, in order."""
         list(map(setattr, kps, repeat("pt"), zip(xy[:, 0].tolist(), xy[:, 1].tolist())))
         list(map(setattr, kps, repeat("angle"), angle.tolist()))
-        desc = np.empty((len(kps), 32), np.uint8)
-        bounds = np.searchsorted(level, np.arange(self.n_levels + 1))
-        for lv in np.flatnonzero(np.diff(bounds)).tolist():
-            s, e = bounds[lv], bounds[lv + 1]
-            kps_out, desc_l = self._orb.compute(pyramid[lv], kps[s:e])
-            if len(kps_out) != e - s:
-                raise RuntimeError(f"ORB dropped {e - s - len(kps_out)} of {e - s} keypoints inside the edge")
-            desc[s:e] = desc_l
+        kps_out, desc = self._orb.compute(img, kps)
+        if len(kps_out) != len(kps):
+            raise RuntimeError(f"ORB dropped {len(kps) - len(kps_out)} of {len(kps)} keypoints inside the edge")
         return desc
