@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import cv2
@@ -202,14 +203,26 @@ def test_extract_reports_stage_timings(kitti_left, extractor):
     np.testing.assert_array_equal(kp2.desc, kp.desc)
 
 
-def test_extract_pair_threads_and_budget_override(kitti_left):
+@pytest.mark.parametrize("worker", ["process", "thread"])
+def test_extract_pair_threads_and_budget_override(kitti_left, worker):
     img, pyr, kp = kitti_left
     pyr_r = ORBExtractor(ORBConfig()).build_pyramid(_kitti("image_1"))
     seq = ORBExtractor(ORBConfig(threads=1)).extract_pair(pyr, pyr_r, n_features_right=3000)
-    par = ORBExtractor(ORBConfig(threads=2)).extract_pair(pyr, pyr_r, n_features_right=3000)
-    for a, b in zip(seq, par):
-        np.testing.assert_array_equal(a.uv, b.uv)
-        np.testing.assert_array_equal(a.desc, b.desc)
+    parallel = ORBExtractor(ORBConfig(threads=2, worker=worker))
+    first = parallel.extract_pair(pyr, pyr_r, n_features_right=3000)  # a process worker starts meanwhile
+    if worker == "process":
+        deadline = time.monotonic() + 60.0
+        while not parallel._worker[1].ready():
+            assert time.monotonic() < deadline, "the ORB worker process did not start"
+            time.sleep(0.05)
+    par = parallel.extract_pair(pyr, pyr_r, n_features_right=3000)
+    for a, b, c in zip(seq, first, par):
+        for name in ("uv", "octave", "angle", "response", "desc"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+            np.testing.assert_array_equal(getattr(a, name), getattr(c, name))
+    with pytest.raises(InputError):  # the worker's error reaches the caller; the worker still serves
+        parallel.extract_pair(pyr, pyr_r, n_features_right=0)
+    np.testing.assert_array_equal(parallel.extract_pair(pyr, pyr_r)[1].desc, ORBExtractor(ORBConfig()).extract(pyr_r).desc)
     np.testing.assert_array_equal(seq[0].desc, kp.desc)
     assert 0.95 * 3000 <= len(seq[1]) <= 3000
     with pytest.raises(InputError):

@@ -14,9 +14,15 @@ keypoint objects. OpenCV 5.0 keeps the angle of provided keypoints (checked in t
 from __future__ import annotations
 
 import os
+import pickle
+import select
+import subprocess
+import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 from itertools import repeat
 from operator import attrgetter
 
@@ -180,7 +186,7 @@ class ORBExtractor:
         self._w_u, self._w_v = _ic_kernels()
         self._fast_ini = cv2.FastFeatureDetector_create(cfg.ini_th_fast, True)
         self._fast_min = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
-        self._worker: tuple[int, ThreadPoolExecutor, ORBExtractor] | None = None  # (pid, pool, twin) for extract_pair
+        self._worker: tuple[int, _Worker | ThreadPoolExecutor] | None = None  # (owner pid, worker) for extract_pair
         self._orb = cv2.ORB_create(
             nfeatures=1, nlevels=1, edgeThreshold=cfg.edge_threshold, patchSize=cfg.patch_size, fastThreshold=cfg.min_th_fast
         )
@@ -235,16 +241,23 @@ class ORBExtractor:
     def extract_pair(
         self, pyr_left: list[np.ndarray], pyr_right: list[np.ndarray], mask_left: np.ndarray | None = None, n_features_right: int | None = None
     ) -> tuple[Keypoints, Keypoints]:
-        """`extract` on both images of a stereo pair (same result). With cfg.threads > 1 the right image
-        runs in a worker thread: OpenCV and the large numpy operations release the GIL."""
+        """`extract` on both images of a stereo pair (same result). With cfg.threads > 1 the right image runs
+        in a worker (cfg.worker) while this one does the left: a process (started at the first call, fed by a
+        pipe) runs in parallel; a thread shares the GIL (only OpenCV's calls and large numpy operations overlap)."""
         if self.cfg.threads <= 1:
             return self.extract(pyr_left, mask_left), self.extract(pyr_right, None, n_features_right)
-        if self._worker is None or self._worker[0] != os.getpid():  # a forked child gets its own thread
-            self._worker = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="orb-right"), ORBExtractor(self.cfg))
-        _, pool, twin = self._worker
-        right = pool.submit(twin.extract, pyr_right, None, n_features_right)
+        if self._worker is None or self._worker[0] != os.getpid():  # a forked child gets its own worker
+            self._worker = (os.getpid(), _Worker() if self.cfg.worker == "process" else ThreadPoolExecutor(1, "orb-right"))
+        if isinstance(self._worker[1], _Worker) and not self._worker[1].ready():  # still starting: no wait
+            return self.extract(pyr_left, mask_left), self.extract(pyr_right, None, n_features_right)
+        right = self._worker[1].submit(_extract, self.cfg, pyr_right, n_features_right)
         left = self.extract(pyr_left, mask_left)
         return left, right.result()
+
+    def __del__(self) -> None:
+        worker = getattr(self, "_worker", None)
+        if worker is not None and worker[0] == os.getpid():
+            worker[1].shutdown(wait=False)
 
     def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray]:
         """FAST candidates by ORB-SLAM2's per-cell rule: a cell keeps its corners at ini_th_fast, or those at
@@ -340,3 +353,90 @@ class ORBExtractor:
         if len(kps_out) != len(kps):
             raise RuntimeError(f"ORB dropped {len(kps) - len(kps_out)} of {len(kps)} keypoints inside the edge")
         return desc
+
+
+
+def _extract(cfg: ORBConfig, pyramid: list[np.ndarray], n_features: int | None) -> Keypoints:
+    """`ORBExtractor.extract` without a mask, for the worker of `extract_pair` (a fresh extractor: its OpenCV
+    detectors are not shared between threads)."""
+    return ORBExtractor(cfg).extract(pyramid, None, n_features)
+
+
+class _Worker:
+    """A Python process that runs `submit(fn, *args)` calls one at a time: requests and results are pickled
+    through its stdin and its own stdout (`_serve`). Started with `-c`, so it never imports the caller's main
+    script (multiprocessing's spawn would, and fails on a script read from stdin)."""
+
+    def __init__(self) -> None:
+        package_root = str(Path(__file__).resolve().parents[2])
+        bootstrap = f"import sys; sys.path.insert(0, {package_root!r}); from dynaslam2.features.orb import _serve; _serve()"
+        self._proc = subprocess.Popen([sys.executable, "-c", bootstrap], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self._lock = threading.Lock()  # one request in flight
+        self._ready = False  # the worker has imported its modules (its first reply)
+        for pipe in (self._proc.stdin, self._proc.stdout):  # a pyramid in one go: no handoff per 64 KiB
+            try:
+                import fcntl  # Linux: F_SETPIPE_SZ
+
+                fcntl.fcntl(pipe.fileno(), getattr(fcntl, "F_SETPIPE_SZ", 1031), 1 << 20)
+            except (ImportError, OSError):  # elsewhere, or above /proc/sys/fs/pipe-max-size: smaller steps
+                pass
+
+    def ready(self) -> bool:
+        """Whether the worker has started (it replies once, after its imports); never waits."""
+        if not self._ready and select.select([self._proc.stdout], [], [], 0)[0]:
+            self._ready = self._read() is None
+        return self._ready
+
+    def submit(self, fn, *args) -> "_Worker":
+        """Send the call now; `result()` waits for its reply (as a Future's)."""
+        self._lock.acquire()
+        try:
+            pickle.dump((fn, args), self._proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+            self._proc.stdin.flush()
+        except BaseException:
+            self._lock.release()
+            raise
+        return self
+
+    def result(self):
+        """The reply to the call in flight; re-raises the worker's exception."""
+        try:
+            return self._read()
+        finally:
+            self._lock.release()
+
+    def _read(self):
+        try:
+            ok, value = pickle.load(self._proc.stdout)
+        except EOFError:
+            raise RuntimeError(f"ORB worker process exited (code {self._proc.poll()})") from None
+        if not ok:
+            raise value
+        return value
+
+    def shutdown(self, wait: bool = True) -> None:
+        """Close the request pipe: the worker exits."""
+        self._proc.stdin.close()
+        if wait:
+            self._proc.wait()
+
+
+def _serve() -> None:
+    """The loop of a `_Worker` process: unpickle (fn, args) from stdin, pickle (True, result) or (False,
+    exception) to the original stdout (fd 1 goes to stderr, so that nothing else writes into the replies)."""
+    requests, replies = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+    pickle.dump((True, None), replies)  # started (`_Worker.ready`)
+    replies.flush()
+    while True:
+        try:
+            fn, args = pickle.load(requests)
+        except EOFError:
+            return
+        try:
+            reply = (True, fn(*args))
+        except Exception as exc:  # noqa: BLE001 - handed to the caller
+            reply = (False, exc)
+        pickle.dump(reply, replies, protocol=pickle.HIGHEST_PROTOCOL)
+        replies.flush()
