@@ -28,7 +28,10 @@ class ORBConfig:
     edge_threshold: int = 19
     patch_size: int = 31
     cell_size: int = 30
-    threads: int = 2  # extract_pair: the right image in a worker thread when > 1 (OpenCV releases the GIL)
+    threads: int = 2  # extract_pair: the right image in a worker when > 1
+    # The worker of extract_pair: "process" (a Python process per extractor, started at its first pair and fed
+    # through pipes: no shared GIL, both images in parallel) or "thread" (shares the GIL with the left image).
+    worker: Literal["process", "thread"] = "process"
 
     def validate(self) -> None:
         if self.n_features <= 0:
