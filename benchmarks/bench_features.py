@@ -7,7 +7,7 @@ textured pair), and a rendered 640x480 frame of the simulated static street (els
 Each cell: median wall ms, min wall ms, [median process CPU ms] (both cores count); on a shared
 machine the min is the best estimate of the uncontended cost.
 Columns: pyramid (both images), extract (left then right, one thread), pair (extract_pair: right image
-in a worker thread), stereo (match_stereo), frame = pyramid + pair + stereo.
+in the worker of orb.worker, `--worker`), stereo (match_stereo), frame = pyramid + pair + stereo.
 Then the stages of one `extract` of the left image (`timing_ms`): median and min wall ms.
 """
 
@@ -87,15 +87,18 @@ def main() -> None:
     parser.add_argument("--n-features", type=int, default=2000)
     parser.add_argument("--right-factor", type=float, default=1.0, help="right-image budget / n_features")
     parser.add_argument("--cv-threads", type=int, default=None, help="cv2.setNumThreads (default: OpenCV's)")
+    parser.add_argument("--worker", choices=["process", "thread"], default="process", help="orb.worker of extract_pair")
     parser.add_argument("--sad-half-height", type=int, default=None,
                         help="stereo SAD window half-height (default: the config's; 5 = ORB-SLAM2's 11x11)")
     args = parser.parse_args()
     if args.cv_threads is not None:
         cv2.setNumThreads(args.cv_threads)
-    extractor = ORBExtractor(ORBConfig(n_features=args.n_features))
+    extractor = ORBExtractor(ORBConfig(n_features=args.n_features, worker=args.worker))
+    extractor.start_worker(wait=True)
     n_right = int(round(args.n_features * args.right_factor))
     stereo_cfg = StereoConfig() if args.sad_half_height is None else StereoConfig(sad_half_height=args.sad_half_height)
-    print(f"cv2 threads={cv2.getNumThreads()}, n_features={args.n_features}, right={n_right}; ms: median wall, min wall [median cpu]")
+    print(f"cv2 threads={cv2.getNumThreads()}, n_features={args.n_features}, right={n_right}, worker={args.worker}; "
+          "ms: median wall, min wall [median cpu of this process]")
     header = ("image", "pyramid", "extract", "pair", "stereo", "frame")
     print(f"{header[0]:>22} " + " ".join(f"{h:>20}" for h in header[1:]) + "   n_kp  depth%")
     stages = []

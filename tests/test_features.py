@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
 
 import cv2
@@ -210,11 +209,7 @@ def test_extract_pair_threads_and_budget_override(kitti_left, worker):
     seq = ORBExtractor(ORBConfig(threads=1)).extract_pair(pyr, pyr_r, n_features_right=3000)
     parallel = ORBExtractor(ORBConfig(threads=2, worker=worker))
     first = parallel.extract_pair(pyr, pyr_r, n_features_right=3000)  # a process worker starts meanwhile
-    if worker == "process":
-        deadline = time.monotonic() + 60.0
-        while not parallel._worker[1].ready():
-            assert time.monotonic() < deadline, "the ORB worker process did not start"
-            time.sleep(0.05)
+    assert parallel.start_worker(wait=True)
     par = parallel.extract_pair(pyr, pyr_r, n_features_right=3000)
     for a, b, c in zip(seq, first, par):
         for name in ("uv", "octave", "angle", "response", "desc"):

@@ -244,15 +244,19 @@ class ORBExtractor:
         """`extract` on both images of a stereo pair (same result). With cfg.threads > 1 the right image runs
         in a worker (cfg.worker) while this one does the left: a process (started at the first call, fed by a
         pipe) runs in parallel; a thread shares the GIL (only OpenCV's calls and large numpy operations overlap)."""
-        if self.cfg.threads <= 1:
-            return self.extract(pyr_left, mask_left), self.extract(pyr_right, None, n_features_right)
-        if self._worker is None or self._worker[0] != os.getpid():  # a forked child gets its own worker
-            self._worker = (os.getpid(), _Worker() if self.cfg.worker == "process" else ThreadPoolExecutor(1, "orb-right"))
-        if isinstance(self._worker[1], _Worker) and not self._worker[1].ready():  # still starting: no wait
+        if self.cfg.threads <= 1 or not self.start_worker():  # a process still starting: no wait
             return self.extract(pyr_left, mask_left), self.extract(pyr_right, None, n_features_right)
         right = self._worker[1].submit(_extract, self.cfg, pyr_right, n_features_right)
         left = self.extract(pyr_left, mask_left)
         return left, right.result()
+
+    def start_worker(self, wait: bool = False) -> bool:
+        """Start the worker of `extract_pair` now (else its first call does; a process takes ~0.3 s, during
+        which pairs run here). With `wait`, until it has started. Returns whether it has."""
+        if self._worker is None or self._worker[0] != os.getpid():  # a forked child gets its own worker
+            self._worker = (os.getpid(), _Worker() if self.cfg.worker == "process" else ThreadPoolExecutor(1, "orb-right"))
+        worker = self._worker[1]
+        return not isinstance(worker, _Worker) or worker.ready(None if wait else 0.0)
 
     def __del__(self) -> None:
         worker = getattr(self, "_worker", None)
@@ -381,9 +385,10 @@ class _Worker:
             except (ImportError, OSError):  # elsewhere, or above /proc/sys/fs/pipe-max-size: smaller steps
                 pass
 
-    def ready(self) -> bool:
-        """Whether the worker has started (it replies once, after its imports); never waits."""
-        if not self._ready and select.select([self._proc.stdout], [], [], 0)[0]:
+    def ready(self, timeout: float | None = 0.0) -> bool:
+        """Whether the worker has started (it replies once, after its imports), waiting up to `timeout` s
+        (None: until it has)."""
+        if not self._ready and select.select([self._proc.stdout], [], [], timeout)[0]:
             self._ready = self._read() is None
         return self._ready
 
