@@ -217,6 +217,8 @@ def test_extract_pair_threads_and_budget_override(kitti_left, worker):
             np.testing.assert_array_equal(getattr(a, name), getattr(c, name))
     with pytest.raises(InputError):  # the worker's error reaches the caller; the worker still serves
         parallel.extract_pair(pyr, pyr_r, n_features_right=0)
+    with pytest.raises(InputError):  # an error on the left image while the worker does the right one
+        parallel.extract_pair(pyr, pyr_r, np.ones((10, 10), bool))
     np.testing.assert_array_equal(parallel.extract_pair(pyr, pyr_r)[1].desc, ORBExtractor(ORBConfig()).extract(pyr_r).desc)
     np.testing.assert_array_equal(seq[0].desc, kp.desc)
     assert 0.95 * 3000 <= len(seq[1]) <= 3000

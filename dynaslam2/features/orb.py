@@ -13,6 +13,7 @@ keypoint objects. OpenCV 5.0 keeps the angle of provided keypoints (checked in t
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import select
@@ -22,9 +23,9 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from pathlib import Path
 from itertools import repeat
 from operator import attrgetter
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -247,7 +248,12 @@ class ORBExtractor:
         if self.cfg.threads <= 1 or not self.start_worker():  # a process still starting: no wait
             return self.extract(pyr_left, mask_left), self.extract(pyr_right, None, n_features_right)
         right = self._worker[1].submit(_extract, self.cfg, pyr_right, n_features_right)
-        left = self.extract(pyr_left, mask_left)
+        try:
+            left = self.extract(pyr_left, mask_left)
+        except BaseException:
+            with contextlib.suppress(Exception):  # read the right reply: the worker stays in step
+                right.result()
+            raise
         return left, right.result()
 
     def start_worker(self, wait: bool = False) -> bool:
