@@ -16,6 +16,7 @@ from dynaslam2.features import (
     ORBExtractor,
     depth_from_image,
     hamming_distance,
+    hamming_indexed,
     hamming_pairs,
     match_descriptors,
     match_stereo,
@@ -422,6 +423,14 @@ def test_hamming_equals_naive_reference():
     assert hamming_distance(a, b).dtype == np.int32
     np.testing.assert_array_equal(hamming_pairs(a, b[:37]), naive[np.arange(37), np.arange(37)])
     assert hamming_distance(a[:0], b).shape == (0, 300)
+    # indexed pairs, with repeats and the 256-bit extreme (all bits differ: past the uint8 of bitwise_count)
+    b[5] = ~a[3]
+    naive = np.unpackbits(a[:, None, :] ^ b[None, :, :], axis=2).sum(axis=2)
+    ia, ib = rng.integers(0, 37, 500), rng.integers(0, 300, 500)
+    ia[0], ib[0] = 3, 5
+    dist = hamming_indexed(a, b, ia, ib)
+    np.testing.assert_array_equal(dist, naive[ia, ib])
+    assert dist.dtype == np.int32 and dist[0] == 256
 
 
 def test_match_descriptors_recovers_permutation():

@@ -2,6 +2,7 @@
 
 from dynaslam2.features.matcher import (
     hamming_distance,
+    hamming_indexed,
     hamming_pairs,
     match_descriptors,
     rotation_consistent,
@@ -16,6 +17,7 @@ __all__ = [
     "ORBExtractor",
     "depth_from_image",
     "hamming_distance",
+    "hamming_indexed",
     "hamming_pairs",
     "match_descriptors",
     "match_stereo",

@@ -26,13 +26,31 @@ def hamming_pairs(desc_a: np.ndarray, desc_b: np.ndarray) -> np.ndarray:
     return np.bitwise_count(x).sum(axis=1, dtype=np.int32)
 
 
+def _words(desc: np.ndarray) -> np.ndarray:
+    """(N,32) uint8 -> (4, N) uint64: one contiguous array per 64-bit word. Gathering many pairs from
+    these 1-D arrays is ~8x faster than gathering 32-byte rows (KITTI stereo: 44k pairs, 2.2 -> 0.3 ms)."""
+    return np.ascontiguousarray(_as_u64(desc).T)
+
+
+def hamming_indexed(desc_a: np.ndarray, desc_b: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray:
+    """Hamming distances (int32) of the index pairs (desc_a[ia[k]], desc_b[ib[k]]): `hamming_pairs` of the
+    gathered rows, gathered word by word."""
+    wa, wb = _words(desc_a), _words(desc_b)
+    d = np.bitwise_count(wa[0][ia] ^ wb[0][ib])
+    d += np.bitwise_count(wa[1][ia] ^ wb[1][ib])  # <= 128: fits the uint8 of bitwise_count
+    dist = d.astype(np.int32)
+    d = np.bitwise_count(wa[2][ia] ^ wb[2][ib])
+    d += np.bitwise_count(wa[3][ia] ^ wb[3][ib])
+    dist += d
+    return dist
+
+
 def hamming_pairs_within(desc_a: np.ndarray, desc_b: np.ndarray, ia: np.ndarray, ib: np.ndarray,
                          max_dist: int) -> tuple[np.ndarray, np.ndarray]:
     """Positions k of the index pairs (ia[k], ib[k]) whose Hamming distance is <= max_dist, and those
     distances (int32). For selective thresholds on many pairs: the first two 64-bit words already
     exceed max_dist for most unrelated descriptors, so only the survivors read the other two."""
-    wa = np.ascontiguousarray(_as_u64(desc_a).T)  # (4, N): one contiguous array per word
-    wb = np.ascontiguousarray(_as_u64(desc_b).T)
+    wa, wb = _words(desc_a), _words(desc_b)
     d = np.bitwise_count(wa[0][ia] ^ wb[0][ib])
     d += np.bitwise_count(wa[1][ia] ^ wb[1][ib])  # <= 128: fits the uint8 of bitwise_count
     pos = np.flatnonzero(d <= max_dist)
@@ -203,7 +221,7 @@ def search_by_projection(
     q, k = q[keep], k[keep]
     if len(q) == 0:
         return result
-    dist = hamming_pairs(np.asarray(desc_proj)[q], kp.desc[k])
+    dist = hamming_indexed(np.asarray(desc_proj), kp.desc, q, k)
     best, second, _ = _best_two(q, dist, M)
     has = best >= 0
     best_d = np.where(has, dist[np.maximum(best, 0)], 256)

@@ -32,7 +32,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from dynaslam2.config import StereoConfig
 from dynaslam2.errors import InputError
-from dynaslam2.features.matcher import hamming_pairs
+from dynaslam2.features.matcher import hamming_indexed
 from dynaslam2.features.orb import Keypoints, base_to_level, level_scales, level_to_base
 from dynaslam2.geometry.camera import StereoCamera
 
@@ -142,7 +142,7 @@ def match_stereo(
     i, j = i[keep], j[keep]
     if len(i) == 0:
         return u_right, depth
-    dist = hamming_pairs(kp_left.desc[i], kp_right.desc[j]).astype(np.int64)
+    dist = hamming_indexed(kp_left.desc, kp_right.desc, i, j).astype(np.int64)
     # Pairs are grouped by left index: the best per group is the smallest (distance, right index) key,
     # i.e. ORB-SLAM2's first strict minimum over right keypoints in index order.
     starts = np.flatnonzero(np.r_[True, i[1:] != i[:-1]])
