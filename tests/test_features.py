@@ -22,7 +22,7 @@ from dynaslam2.features import (
     match_stereo,
     search_by_projection,
 )
-from dynaslam2.features.matcher import rotation_consistent
+from dynaslam2.features.matcher import _pairs_in_radius, rotation_consistent
 from dynaslam2.features.orb import base_to_level, level_scales, level_to_base
 from dynaslam2.geometry.camera import StereoCamera
 
@@ -451,6 +451,28 @@ def test_rotation_consistency_keeps_three_main_bins():
     keep = rotation_consistent(rot)
     assert keep[:142].all()  # bins 0, 8 and 16 (12 degrees each, centred on multiples of 12)
     assert not rotation_consistent(np.r_[np.full(100, 5.0), np.full(9, 180.0)])[100:].any()  # < 10% of the top
+
+
+@pytest.mark.parametrize("n_query, r_max", [(40, 3.0), (800, 40.0)])  # few queries in a fine grid / many in a coarse one
+def test_pairs_in_radius_equals_brute_force(n_query, r_max):
+    """All (query, keypoint) pairs in the square and octave range, in the order of the grid walk (both ways
+    of finding a cell's run: binary searches when the key table would be much larger than the queried cells)."""
+    rng = np.random.default_rng(3)
+    uv_kp = rng.uniform(0, [1226, 370], (2000, 2))
+    octave = rng.integers(0, 8, 2000)
+    uv_q = rng.uniform(-10, [1236, 380], (n_query, 2))
+    radius = rng.uniform(1.0, r_max, n_query)
+    lo = rng.integers(-1, 8, n_query)
+    rng_oct = np.stack([lo, lo + rng.integers(0, 3, n_query)], axis=1)
+    q, k = _pairs_in_radius(uv_kp, uv_q, radius, octave, rng_oct)
+    inside = np.all(np.abs(uv_kp[None] - uv_q[:, None]) < radius[:, None, None], axis=2)
+    inside &= (octave[None] >= rng_oct[:, :1]) & (octave[None] <= rng_oct[:, 1:])
+    ref_q, ref_k = np.nonzero(inside)
+    assert len(q) == len(ref_q) > 0
+    order = np.lexsort((k, q))
+    np.testing.assert_array_equal(q[order], ref_q)
+    np.testing.assert_array_equal(k[order], ref_k)
+    assert np.all(np.diff(q) >= 0)  # grouped by query
 
 
 def test_search_by_projection_recovers_shift(kitti_left, extractor):

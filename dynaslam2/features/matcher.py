@@ -115,14 +115,12 @@ def _pairs_in_radius(
         o_hi = o_lo
         kp_oct = np.zeros(len(uv_kp), np.int64)
     cell = float(np.clip(2.0 * np.median(radius), 4.0, 128.0))  # measured: ~2 radii per cell is fastest
-    origin = uv_kp.min(axis=0) - 1.0
+    origin = np.array([uv_kp[:, 0].min(), uv_kp[:, 1].min()]) - 1.0  # per column: 8x faster than min(axis=0)
     kc = ((uv_kp - origin) / cell).astype(np.int64)
     n_cx = int(kc[:, 0].max()) + 1
     n_cy = int(kc[:, 1].max()) + 1
     key = (kc[:, 1] * n_cx + kc[:, 0]) * n_oct + kp_oct
     kp_order = np.argsort(key, kind="stable")
-    starts = np.zeros(n_cx * n_cy * n_oct + 1, np.int64)
-    np.cumsum(np.bincount(key, minlength=n_cx * n_cy * n_oct), out=starts[1:])
     # Cell ranges of each query square, clipped to the grid.
     lo = np.maximum(np.floor((uv_q - radius[:, None] - origin) / cell).astype(np.int64), 0)
     hi = np.minimum(np.floor((uv_q + radius[:, None] - origin) / cell).astype(np.int64), [n_cx - 1, n_cy - 1])
@@ -135,8 +133,20 @@ def _pairs_in_radius(
     local = np.arange(len(q_of_cell)) - np.repeat(np.cumsum(n_cells) - n_cells, n_cells)
     nx_c = nx[q_of_cell]
     cid = (lo[q_of_cell, 1] + local // nx_c) * n_cx + lo[q_of_cell, 0] + local % nx_c
-    c_start = starts[cid * n_oct + o_lo[q_of_cell]]
-    c_count = starts[cid * n_oct + o_hi[q_of_cell] + 1] - c_start
+    # Start of each key's run in the sorted keys: a table over all (cell, octave) keys, or binary searches
+    # for the queried ones only when the table is much larger (KITTI 06: tracking ~10k keys for ~2k queried
+    # cells, table faster; fusion's small cells ~45k for ~1k, searches 1.7x faster; crossover measured ~16x).
+    lo_key, hi_key = cid * n_oct + o_lo[q_of_cell], cid * n_oct + o_hi[q_of_cell] + 1
+    n_keys = n_cx * n_cy * n_oct
+    if n_keys > 16 * len(cid):
+        sorted_key = key[kp_order]
+        c_start = np.searchsorted(sorted_key, lo_key)
+        c_count = np.searchsorted(sorted_key, hi_key) - c_start
+    else:
+        starts = np.zeros(n_keys + 1, np.int64)
+        np.cumsum(np.bincount(key, minlength=n_keys), out=starts[1:])
+        c_start = starts[lo_key]
+        c_count = starts[hi_key] - c_start
     q = np.repeat(q_of_cell, c_count)
     if len(q) == 0:
         return empty
