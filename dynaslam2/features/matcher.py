@@ -12,6 +12,12 @@ from dynaslam2.features.orb import Keypoints
 HISTO_LENGTH = 30  # rotation-consistency histogram bins over 360 degrees (ORB-SLAM2)
 
 
+def argsort_keys(key: np.ndarray, n_keys: int) -> np.ndarray:
+    """`np.argsort(key, kind="stable")` of integer keys in [0, n_keys): sorted as uint16 when they fit
+    (numpy's radix sort: 2000 keys 87 -> 6-16 us, 17000 keys 1.2 ms -> 0.09 ms against int64's timsort)."""
+    return np.argsort(key.astype(np.uint16) if n_keys <= 1 << 16 else key, kind="stable")
+
+
 def _as_u64(desc: np.ndarray) -> np.ndarray:
     """(N,32) uint8 -> (N,4) uint64 view (copy only if not contiguous)."""
     desc = np.ascontiguousarray(desc, dtype=np.uint8)
@@ -120,7 +126,7 @@ def _pairs_in_radius(
     n_cx = int(kc[:, 0].max()) + 1
     n_cy = int(kc[:, 1].max()) + 1
     key = (kc[:, 1] * n_cx + kc[:, 0]) * n_oct + kp_oct
-    kp_order = np.argsort(key, kind="stable")
+    kp_order = argsort_keys(key, n_cx * n_cy * n_oct)
     # Cell ranges of each query square, clipped to the grid.
     lo = np.maximum(np.floor((uv_q - radius[:, None] - origin) / cell).astype(np.int64), 0)
     hi = np.minimum(np.floor((uv_q + radius[:, None] - origin) / cell).astype(np.int64), [n_cx - 1, n_cy - 1])

@@ -32,7 +32,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from dynaslam2.config import StereoConfig
 from dynaslam2.errors import InputError
-from dynaslam2.features.matcher import hamming_indexed
+from dynaslam2.features.matcher import argsort_keys, hamming_indexed
 from dynaslam2.features.orb import Keypoints, base_to_level, level_scales, level_to_base
 from dynaslam2.geometry.camera import StereoCamera
 
@@ -50,7 +50,7 @@ def _row_candidates(kp_left: Keypoints, kp_right: Keypoints, n_rows: int, scale_
     j = np.repeat(np.arange(len(kp_right)), n_rows_of)
     rows = np.repeat(row_lo, n_rows_of) + (np.arange(len(j)) - np.repeat(np.cumsum(n_rows_of) - n_rows_of, n_rows_of))
     key = rows * n_oct + kp_right.octave[j]
-    order = np.argsort(key, kind="stable")
+    order = argsort_keys(key, n_rows * n_oct)
     j = j[order]
     starts = np.searchsorted(key[order], np.arange(n_rows * n_oct + 1))
     row_left = np.clip(kp_left.uv[:, 1].astype(np.int64), 0, n_rows - 1) * n_oct
@@ -160,7 +160,7 @@ def match_stereo(
     su_l = np.rint(base_to_level(u_l[i], scale_xy[:, 0])).astype(np.int64)
     sv_l = np.rint(base_to_level(kp_left.uv[i, 1].astype(np.float64), scale_xy[:, 1])).astype(np.int64)
     su_r = np.rint(base_to_level(u_r[j], scale_xy[:, 0])).astype(np.int64)
-    order = np.argsort(octave, kind="stable")  # gather level by level, then one SAD pass
+    order = argsort_keys(octave, len(scale_factors))  # gather level by level, then one SAD pass
     i, octave, su_l, sv_l, su_r, scale_xy = i[order], octave[order], su_l[order], sv_l[order], su_r[order], scale_xy[order]
     ok = np.zeros(len(i), bool)
     patches_l, strips = [], []
