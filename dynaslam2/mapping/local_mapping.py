@@ -288,10 +288,10 @@ class LocalMapper:
         more observations."""
         P = map_.points
         pts = P.resolve(pt_ids)
-        pts = np.unique(pts[pts >= 0])
-        in_kf = np.zeros(P.size, dtype=bool)
-        in_kf[kf.point_ids[kf.point_ids >= 0]] = True
-        pts = pts[~in_kf[pts]]
+        mark = np.zeros(P.size, dtype=bool)  # a mark per point id: sorted unique ids without a sort
+        mark[pts[pts >= 0]] = True
+        mark[kf.point_ids[kf.point_ids >= 0]] = False  # not those the keyframe already has
+        pts = np.flatnonzero(mark)
         if len(pts) == 0:
             return
         cam = self.camera
