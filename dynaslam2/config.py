@@ -66,6 +66,13 @@ class StereoConfig:
     outlier_sad_factor: float = 1.5 * 1.4  # reject matches with SAD > factor * median SAD
     th_depth_baselines: float = 40.0
     right_features_factor: float = 1.0  # right-image ORB budget = factor x orb.n_features (more: more depths)
+    # `dynamic` mode: keypoints on dynamic instances that got no depth (no right keypoint matched them:
+    # about half of them on small, far objects at 640x480) are searched along their row of the right
+    # image (SAD, depths row_search_min_depth_m to objects.max_point_depth_m); kept when the best SAD is
+    # below row_search_uniqueness x the best one more than 1 px away. Static keypoints are untouched.
+    dynamic_row_search: bool = True
+    row_search_min_depth_m: float = 2.0
+    row_search_uniqueness: float = 0.5
 
     def validate(self) -> None:
         if not 0 < self.th_low <= self.th_high <= 256:
@@ -73,6 +80,9 @@ class StereoConfig:
         if self.sad_window < 1 or self.sad_search < 1 or self.sad_half_height < 0:
             raise ConfigError(f"stereo: expected sad_window >= 1, sad_search >= 1, sad_half_height >= 0, got "
                               f"{self.sad_window}, {self.sad_search}, {self.sad_half_height}")
+        if not (self.row_search_min_depth_m > 0 and 0 < self.row_search_uniqueness <= 1):
+            raise ConfigError(f"stereo: expected row_search_min_depth_m > 0 and row_search_uniqueness in (0, 1], got "
+                              f"{self.row_search_min_depth_m}, {self.row_search_uniqueness}")
         if not (self.row_band_scale > 0 and self.outlier_sad_factor > 0 and self.right_features_factor > 0):
             raise ConfigError("stereo: row_band_scale, outlier_sad_factor and right_features_factor must be positive")
 

@@ -101,3 +101,33 @@ def test_tracked_objects_score(run):
     assert best["tp_ratio"] >= 0.8
     assert best["ate_cam_m"] <= 0.5
     assert best["id_switches"] == 0
+
+
+def test_row_search_gives_dynamic_keypoints_depth(run):
+    """stereo.dynamic_row_search: keypoints on dynamic instances without a right-keypoint match get a
+    depth from the right image's row, close to the rendered depth; static keypoints are unchanged."""
+    from dynaslam2.config import load_config
+    from dynaslam2.tracking.frontend import FrameBuilder
+    from dynaslam2.tracking.objects import dynamic_keypoints
+
+    seq = open_sequence(run[0])
+    frames = {}
+    for search in (False, True):
+        builder = FrameBuilder(load_config(None, ["mode=dynamic", f"stereo.dynamic_row_search={search}"]), seq.camera)
+        frames[search] = [builder.build(seq[i], {}) for i in range(0, FRAMES, 5)]
+    n_before = n_after = 0
+    disparity_errors = []
+    for i, (off, on) in zip(range(0, FRAMES, 5), zip(frames[False], frames[True])):
+        np.testing.assert_array_equal(off.keypoints.uv, on.keypoints.uv)
+        np.testing.assert_array_equal(off.depth[off.static], on.depth[on.static])
+        dyn = dynamic_keypoints(on)
+        np.testing.assert_array_equal(on.depth[dyn & (off.depth > 0)], off.depth[dyn & (off.depth > 0)])
+        n_before += np.count_nonzero(dyn & (off.depth > 0))
+        n_after += np.count_nonzero(dyn & (on.depth > 0))
+        new = dyn & (off.depth <= 0) & (on.depth > 0)
+        uv = np.rint(on.keypoints.uv[new]).astype(int)
+        gt = seq[i].depth[uv[:, 1], uv[:, 0]]
+        disparity_errors.append(seq.camera.bf / on.depth[new] - seq.camera.bf / np.where(gt > 0, gt, np.inf))
+    errors = np.abs(np.concatenate(disparity_errors))
+    assert n_after >= 1.1 * n_before, (n_before, n_after)
+    assert np.mean(errors < 1.0) > 0.85, np.mean(errors < 1.0)

@@ -24,6 +24,7 @@ from dynaslam2.features import (
 )
 from dynaslam2.features.matcher import _pairs_in_radius, rotation_consistent
 from dynaslam2.features.orb import base_to_level, level_scales, level_to_base
+from dynaslam2.features.stereo import search_stereo_rows
 from dynaslam2.geometry.camera import StereoCamera
 
 KITTI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kitti-odometry-06"
@@ -305,6 +306,40 @@ def test_stereo_subpixel_on_shifted_texture(extractor, disparity):
     err = np.abs(kp_l.uv[has, 0] - u_right[has] - disparity)
     assert np.median(err) < 0.15, np.median(err)
     assert np.mean(err < 1.0) > 0.95
+
+
+@pytest.mark.parametrize("disparity", [7.25, 20.8])
+def test_stereo_row_search_without_right_keypoints(disparity):
+    """search_stereo_rows finds the disparity of left keypoints by their row alone (no right keypoint)."""
+    left, right = _shifted_pair(disparity)
+    camera = StereoCamera(300.0, 300.0, 160.0, 120.0, 0.1, 320, 240)
+    ex = ORBExtractor(ORBConfig(n_features=500))
+    pyr_l, pyr_r = ex.build_pyramid(left), ex.build_pyramid(right)
+    kp_l = ex.extract(pyr_l)
+    idx = np.flatnonzero(kp_l.uv[:, 0] > 60)  # the search range (up to 40 px) stays inside the right image
+    u_right, depth = search_stereo_rows(kp_l, idx, pyr_l, pyr_r, camera, StereoConfig(), 0.75, 10.0)
+    has = depth > 0
+    assert has.mean() > 0.8, has.mean()
+    err = np.abs(kp_l.uv[idx[has], 0] - u_right[has] - disparity)
+    assert np.median(err) < 0.15, np.median(err)
+    assert np.mean(err < 1.0) > 0.95
+    np.testing.assert_allclose(depth[has], camera.bf / (kp_l.uv[idx[has], 0] - u_right[has]))
+
+
+def test_stereo_row_search_rejects_repeated_texture():
+    """On a texture repeating along the row every 9 px several disparities fit equally (level 0, where
+    the repetition is exact): no depth (uniqueness test)."""
+    rng = np.random.default_rng(1)
+    period = np.clip(rng.normal(128, 60, (240, 9)), 0, 255)
+    img = np.tile(period, (1, 36))[:, :320].astype(np.uint8)
+    camera = StereoCamera(300.0, 300.0, 160.0, 120.0, 0.1, 320, 240)
+    ex = ORBExtractor(ORBConfig(n_features=500))
+    pyr = ex.build_pyramid(img)
+    kp = ex.extract(pyr)
+    idx = np.flatnonzero((kp.uv[:, 0] > 60) & (kp.octave == 0))
+    assert len(idx) > 20
+    _, depth = search_stereo_rows(kp, idx, pyr, pyr, camera, StereoConfig(), 0.75, 10.0)
+    assert not np.any(depth > 0)
 
 
 def _slanted_pair(slope: float, d0: float = 30.0, shape=(240, 320), seed: int = 0):

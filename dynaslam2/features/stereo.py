@@ -193,6 +193,71 @@ def match_stereo(
     return u_right, depth
 
 
+def search_stereo_rows(
+    kp_left: Keypoints,
+    idx: np.ndarray,
+    pyr_left: list[np.ndarray],
+    pyr_right: list[np.ndarray],
+    camera: StereoCamera,
+    cfg: StereoConfig,
+    min_depth_m: float,
+    max_depth_m: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Right-image u and depth (m) of the left keypoints `idx` found by a SAD search along their row of
+    the right image (no right keypoint needed), over the disparities of depths [min_depth_m,
+    max_depth_m], on the keypoint's level; (len(idx),) float64 each, -1 where none. Same SAD window,
+    brightness normalization and parabola as `match_stereo`; a match needs its best SAD below
+    row_search_uniqueness x the best SAD away from it (more than one px off: StereoBM's uniqueness
+    test) and its sub-pixel vertex within max_subpixel_delta. For keypoints `match_stereo` left
+    without depth because no right keypoint matched them (small, far objects)."""
+    idx = np.asarray(idx, dtype=np.int64)
+    u_right = np.full(len(idx), -1.0)
+    depth = np.full(len(idx), -1.0)
+    if len(idx) == 0:
+        return u_right, depth
+    w, h = cfg.sad_window, cfg.sad_half_height
+    k, kh = 2 * w + 1, 2 * h + 1
+    scales = level_scales(pyr_left)
+    octave = kp_left.octave[idx]
+    u_l = kp_left.uv[idx, 0].astype(np.float64)
+    for level in np.unique(octave).tolist():
+        sel = np.flatnonzero(octave == level)
+        sx, sy = scales[level]
+        d_lo, d_hi = camera.bf / max_depth_m / sx, camera.bf / min_depth_m / sx  # level disparities
+        L = int(np.ceil((d_hi - d_lo) / 2.0)) + 1
+        d_mid = int(np.rint((d_hi + d_lo) / 2.0))
+        img_r = pyr_right[level]
+        cols = img_r.shape[1]
+        pad = d_mid + L + w + 1  # every strip inside the padded images; offsets off the image masked
+        right = cv2.copyMakeBorder(img_r, h, h, pad, pad, cv2.BORDER_REPLICATE)
+        left = cv2.copyMakeBorder(pyr_left[level], h, h, w, w, cv2.BORDER_REPLICATE)
+        su = np.rint(base_to_level(u_l[sel], sx)).astype(np.int64)
+        sv = np.rint(base_to_level(kp_left.uv[idx[sel], 1].astype(np.float64), sy)).astype(np.int64)
+        patch = sliding_window_view(left, (kh, k))[sv, su]  # padded: row sv - h + h, column su - w + w
+        first = su - d_mid - L  # right column of offset 0
+        strip = sliding_window_view(right, (kh, k + 2 * L))[sv, first - w + pad]
+        dists = _sad_curve(patch, strip, w, L, cfg.sad_centre).astype(np.float64)
+        col = first[:, None] + np.arange(2 * L + 1)[None]
+        disp = su[:, None] - col
+        valid = (col >= w) & (col < cols - w) & (disp >= d_lo - 1) & (disp <= d_hi + 1)
+        dists[~valid] = np.inf
+        inc, delta, sad, ok = _parabola(np.where(valid, dists, 1e30), L)
+        best = inc + L
+        rr = np.arange(len(sel))
+        away = dists.copy()
+        for o in (-1, 0, 1):
+            away[rr, np.clip(best + o, 0, 2 * L)] = np.inf
+        nb = valid[rr, np.clip(best - 1, 0, 2 * L)] & valid[rr, np.clip(best + 1, 0, 2 * L)]
+        ok &= valid[rr, best] & nb & (sad < cfg.row_search_uniqueness * away.min(axis=1))
+        ok &= np.abs(delta) <= cfg.max_subpixel_delta
+        ur = level_to_base(first + best + delta, sx)
+        disparity = u_l[sel] - ur
+        ok &= disparity > 0
+        u_right[sel[ok]] = ur[ok]
+        depth[sel[ok]] = camera.bf / disparity[ok]
+    return u_right, depth
+
+
 def depth_from_image(kp_left: Keypoints, depth: np.ndarray, camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
     """RGB-D: depth at the nearest pixel of each keypoint (<= 0 / non-finite -> -1) and the virtual
     right coordinate u - bf / depth (ORB-SLAM2's ComputeStereoFromRGBD). Returns (u_right, depth)."""

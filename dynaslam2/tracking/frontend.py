@@ -12,7 +12,7 @@ from dynaslam2.classes import CLASS_IDS, DYNAMIC_CLASSES, instance_class_id
 from dynaslam2.config import SlamConfig
 from dynaslam2.errors import InputError
 from dynaslam2.features.orb import ORBExtractor, to_gray
-from dynaslam2.features.stereo import depth_from_image, match_stereo
+from dynaslam2.features.stereo import depth_from_image, match_stereo, search_stereo_rows
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.io.types import FrameData
 from dynaslam2.map.frame import Frame
@@ -53,6 +53,18 @@ class FrameBuilder:
         if data.right is None and data.depth is None:
             raise InputError(f"frame {data.index}: needs a right image or a depth image")
 
+    def _row_search(self, kp, dyn: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray) -> None:
+        """Depth by row search (stereo.dynamic_row_search) for the keypoints on dynamic instances that
+        `match_stereo` left without; fills `u_right` and `depth` in place."""
+        col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
+        row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
+        idx = np.flatnonzero(dyn[row, col] & (depth <= 0))
+        ur, z = search_stereo_rows(kp, idx, pyr_l, pyr_r, self.camera, self.config.stereo,
+                                   self.config.stereo.row_search_min_depth_m, self.config.objects.max_point_depth_m)
+        found = z > 0
+        u_right[idx[found]] = ur[found]
+        depth[idx[found]] = z[found]
+
     def build(self, data: FrameData, timing_ms: dict[str, float]) -> Frame:
         """Extract and match features of `data`; adds `features` and `stereo` to `timing_ms`."""
         self._check(data)
@@ -76,6 +88,8 @@ class FrameBuilder:
         else:
             u_right, depth = match_stereo(kp, kp_r, pyr_l, pyr_r, self.camera, self.extractor.scale_factors,
                                           self.config.stereo)
+            if dyn is not None and mode == "dynamic" and self.config.stereo.dynamic_row_search:
+                self._row_search(kp, dyn, pyr_l, pyr_r, u_right, depth)
         t2 = time.perf_counter()
         n = len(kp)
         col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
