@@ -386,6 +386,11 @@ class ObjectsConfig:
     # into its position in the object frame, weighted by its depth information (1 px disparity at its
     # level), so that points created far away take the depth of closer views.
     fuse_points: bool = True
+    # With fuse_points, only the shape is averaged in: the depth-weighted mean of the updates (a common
+    # shift of all points, i.e. of the object frame along the body: what an error of the pose the
+    # observations were placed with produces) is removed, so the object-frame origin stays on the body
+    # instead of drifting with the pose errors (errors along the viewing axis, several metres at 30 m).
+    fuse_shape_only: bool = True
     # Not in the paper: a constant-velocity Kalman filter of each object-frame origin between BAs
     # (white acceleration accel_sigma m/s^2; pose-only position covariance from its stereo Jacobian,
     # 1 px at level 0, plus position_floor_m; unknown initial speed initial_speed_sigma m/s).

@@ -320,3 +320,38 @@ def test_validation_gate_rejects_an_association_outlier(gate):
     T_off = inverse(T_car[0]) @ objects.tracks[e.track_id].observations[0].T_w_o
     err = np.linalg.norm(e.T_w_o[:3, 3] - (T_car[8] @ T_off)[:3, 3])
     assert (err < 0.1) if np.isfinite(gate) else (err > 0.5)
+
+
+@pytest.mark.parametrize("shape_only", [True, False])
+def test_point_fusion_keeps_the_object_frame_on_the_body(shape_only):
+    """Stereo observations placed with a pose that is off by 0.4 m (what a pose error does) and one
+    point seen 0.3 m off its place: with objects.fuse_shape_only the points' common shift is not
+    averaged in (the object frame stays where it was on the body) while the point's own offset is;
+    without, every point moves by the pose error's share."""
+    rng = np.random.default_rng(12)
+    car = Body(rng, 1001, 40, (4.0, 1.5, 1.5))
+    T_car = make_pose(np.eye(3), np.array([1.0, 0.8, 12.0]))
+    objects = ObjectMap()
+    trk = tracker(f"objects.fuse_shape_only={str(shape_only).lower()}", "objects.filter=false")
+    (e,) = trk.track(make_frame(0, [(car, T_car)]), None, objects).estimates
+    obs = objects.tracks[e.track_id].last
+    pts = obs.pt_ids
+    X_before = objects.points.X_o[pts].copy()
+    moved = car.X_b.copy()
+    body_idx = np.array([np.flatnonzero((car.desc == d).all(1))[0] for d in objects.points.desc[pts]])
+    moved[body_idx[0]] += [0.0, 0.0, 0.3]  # seen 0.3 m deeper in the new view (a correction of its depth)
+    seen = Body(rng, 1001, 0, (1.0, 1.0, 1.0))
+    seen.X_b, seen.desc = moved, car.desc
+    frame = make_frame(1, [(seen, T_car)])
+    kp = np.array([np.flatnonzero((frame.keypoints.desc == d).all(1))[0] for d in objects.points.desc[pts]])
+    T_wrong = obs.T_w_o.copy()
+    T_wrong[:3, 3] += [0.0, 0.0, 0.4]
+    trk._fuse_points(frame, objects, T_wrong, kp, pts)
+    shift = objects.points.X_o[pts] - X_before
+    share = 0.5  # equal depth information before and after: the new observation weighs half
+    others = np.delete(shift, 0, axis=0)
+    if shape_only:
+        assert np.abs(others).max() < 0.02  # just the point's own 0.3 m spread over the common part
+        assert shift[0, 2] > 0.9 * share * 0.3
+    else:
+        np.testing.assert_allclose(others, np.tile([0.0, 0.0, -share * 0.4], (len(others), 1)), atol=1e-9)

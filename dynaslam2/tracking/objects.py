@@ -166,7 +166,10 @@ class ObjectTracker:
         X_o = self._world_points(frame, kp) @ T_o_w[:3, :3].T + T_o_w[:3, 3]
         P = objects.points
         w_old, w_new = P.weight[pts], self._depth_weight(frame, kp)
-        P.X_o[pts] = (w_old[:, None] * P.X_o[pts] + w_new[:, None] * X_o) / (w_old + w_new)[:, None]
+        r = X_o - P.X_o[pts]
+        if self.cfg.fuse_shape_only and w_new.sum() > 0:
+            r -= (w_new[:, None] * r).sum(axis=0) / w_new.sum()
+        P.X_o[pts] += (w_new / (w_old + w_new))[:, None] * r
         P.weight[pts] = w_old + w_new
 
     def _compact(self, X: np.ndarray) -> np.ndarray:
