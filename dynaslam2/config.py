@@ -228,6 +228,24 @@ class ObjectOptimConfig:
     # (tests/test_object_ba.py) 1 + 0 ends farther than 5 + 10 from lambda 1: kept at ORB-SLAM2's settings
     lambda_initial: float = 1.0
     min_observation_points: int = 5  # an object observation with fewer used point observations keeps its pose
+    # Joint case (camera and object weak) after the static local BA (objects.static_ba_first): True = the static
+    # terms (eq. 1) linearized once at its estimate (Huber weights there) and reduced to the free cameras by
+    # eliminating the static points (optim/static_schur.py), the points following the cameras by
+    # back-substitution; False = every static point a variable, eq. (1) relinearized at every LM iteration (the
+    # exact joint problem). Measured on the captured windows of traffic s0/s1 and following s0 640x480: 0.23-0.24x
+    # the CPU time of the joint windows (median ~65 ms against ~285), lower final cost on 62 of 64
+    # (object_ba.py's docstring). Off by default: end to end (dynamic mode, traffic and following s0-s2, 150 fr)
+    # the mean ego ATE went 0.026 -> 0.034 m (traffic s1 0.026 -> 0.042, s2 0.021 -> 0.042), object ATE
+    # 0.48 -> 0.53 m; the exact form run closer to convergence (ba_relative_error_tol 1e-3) moves the same way
+    # (traffic s2 0.058, following s0 0.022 -> 0.031 m): the window optimum, not the reduction, costs accuracy.
+    static_reduced: bool = False
+    # LM damping (whitened units) of each static point's block in that reduction (the points take one step):
+    # without it, far points (depth information ~1e-6) jump by hundreds of metres for a millimetre of camera
+    # motion. Summed final cost on the 50 windows of traffic s0: 1e-6 / 1e-4 / 1e-2 / 1 -> 146694 / 146660 /
+    # 146691 / 146757 (the exact form 146723); with 1 (points barely move, as in the exact form's LM) the ego
+    # ATE of traffic s1 / s2 stays 0.029 / 0.022 m, but the final cost is higher than the exact form's on 32 of 35
+    # joint windows (median +0.8).
+    static_point_damping: float = 1e-4
     tail_seconds: float = 2.0  # object-weak BA (III-D): keyframes within this time of the newest are free
 
     def validate(self) -> None:
@@ -241,6 +259,8 @@ class ObjectOptimConfig:
             raise ConfigError(f"optim.objects.tail_seconds: expected > 0, got {self.tail_seconds}")
         if not self.lambda_initial > 0:
             raise ConfigError(f"optim.objects.lambda_initial: expected > 0, got {self.lambda_initial}")
+        if not self.static_point_damping > 0:
+            raise ConfigError(f"optim.objects.static_point_damping: expected > 0, got {self.static_point_damping}")
 
 
 @dataclass

@@ -283,6 +283,36 @@ def test_exact_measurements_recover_objects_exactly():
 
 
 @pytest.mark.parametrize("seed", [6, 7])
+@pytest.mark.parametrize("noise", [0.0, 0.5])
+def test_reduced_static_terms_after_the_static_ba_reach_the_exact_joint_optimum(seed, noise):
+    """As the caller runs it (objects.static_ba_first): the static local BA first (its outliers erased),
+    then the BA with objects with the static terms reduced to the cameras at that estimate
+    (optim.objects.static_reduced): cameras and object poses within 1 mm of the exact joint BA's (the two
+    classify the static outliers at different estimates), at the truth without noise. (The points'
+    back-substitution: test_static_schur.)"""
+    w = window(seed, n_static=400, n_object_points=40, outlier_fraction=0.03, noise_scale=noise)
+    p = w.problem
+    static = local_bundle_adjustment(BAProblem(p.T_c_w, p.fixed, p.X_w, p.obs_kf, p.obs_pt, p.meas, p.inv_sigma2),
+                                     CAMERA, OptimConfig(local_ba_iterations_robust=10, local_ba_iterations_refine=10,
+                                                         ba_relative_error_tol=0.0))
+    keep = static.inlier  # the static BA's outliers erased, as by the caller
+    start = dataclasses.replace(p, T_c_w=static.T_c_w, X_w=static.X_w, obs_kf=p.obs_kf[keep], obs_pt=p.obs_pt[keep],
+                                meas=p.meas[keep], inv_sigma2=p.inv_sigma2[keep], static_optimized=True)
+    exact = object_bundle_adjustment(start, CAMERA, OptimConfig(ba_relative_error_tol=0.0,
+                                                                objects=ObjectOptimConfig(static_reduced=False)))
+    reduced = object_bundle_adjustment(start, CAMERA, OptimConfig(ba_relative_error_tol=0.0,
+                                                                  objects=ObjectOptimConfig(static_reduced=True)))
+    assert reduced.n_parameters["static_point"] == 0 and exact.n_parameters["static_point"] > 0
+    assert np.abs(inverse(reduced.T_c_w)[:, :3, 3] - inverse(exact.T_c_w)[:, :3, 3]).max() < 1e-3
+    assert np.abs(reduced.T_w_o[:, :3, 3] - exact.T_w_o[:, :3, 3]).max() < 1e-3
+    if noise == 0.0:
+        free = ~p.fixed
+        dt, _ = pose_errors(reduced.T_c_w[free], w.T_c_w_true[free])
+        ot, _ = pose_errors(reduced.T_w_o, w.T_w_o_true)
+        assert dt.max() < 1e-5 and ot.max() < 1e-5
+
+
+@pytest.mark.parametrize("seed", [6, 7])
 def test_noisy_window_recovers_object_motion(seed):
     """Noisy stereo measurements (0.5 px at level 0, x1.2 per level) with 5% outliers, static points
     4-25 m and objects 6-12 m ahead: object poses within 2 cm / 0.2 deg (median over the free

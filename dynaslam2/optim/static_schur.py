@@ -1,0 +1,170 @@
+"""The static reprojection terms (paper eq. 1) of a BA window reduced to its free cameras (Schur complement).
+
+Linearized at the current estimate (Huber weights of that estimate, as gtsam's Robust model), the static
+terms are the quadratic cost + g^T d + 1/2 d^T H d in the camera and point increments; eliminating the
+points gives the reduced camera system S = H_cc - H_cp H_pp^-1 H_pc, s = g_c - H_cp H_pp^-1 g_p (points
+first, as the SCHUR elimination order), and once the cameras are solved each point moves by
+-H_pp^-1 (g_p + H_pc d_c) (back-substitution): without damping, exactly
+gtsam's linearization and partial elimination of the same GenericStereoFactor3D / projection factors
+(tests/test_static_schur.py), computed in vectorized numpy (closed-form stereo Jacobians, one
+block-sparse product for the reduction) instead of building, linearizing and eliminating ~20k factors.
+
+`StaticSchur.factor` puts the reduced system into a gtsam graph as one factor on the free camera
+poses (T_w_c, right perturbations), whose error is the quadratic model of the static cost: the BA
+with objects (object_ba.py, `optim.objects.static_reduced`) then optimizes cameras and objects with
+the static terms linearized once, the points following by back-substitution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import gtsam
+import numpy as np
+import scipy.sparse as sp
+from scipy.linalg import solve_triangular
+
+from dynaslam2.geometry.camera import StereoCamera
+from dynaslam2.optim.gtsam_utils import pose3_from_matrix
+from dynaslam2.optim.reprojection import is_stereo, residuals
+
+
+@dataclass
+class StaticSchur:
+    """Reduced camera system of the static terms and what the back-substitution needs."""
+
+    cams: np.ndarray  # (C,) indices of the free cameras, the order of S's 6-blocks
+    S: np.ndarray  # (6C, 6C)
+    s: np.ndarray  # (6C,)
+    points: np.ndarray  # (P',) indices of the points eliminated
+    H_pp_inv: np.ndarray  # (P', 3, 3) inverse of the damped point blocks
+    g_p: np.ndarray  # (P', 3)
+    obs_cam: np.ndarray  # (M',) row in `cams` of each used observation with a free camera
+    obs_point: np.ndarray  # (M',) row in `points`
+    W: np.ndarray  # (M', 6, 3) H_cp block of each such observation
+    cost: float  # 1/2 sum of the whitened, Huber-weighted squared residuals at the linearization point
+
+    @cached_property
+    def _square_root(self) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b) with A^T A = S, -A^T b = s: A = L^T for S = L L^T (S is positive definite when the fixed
+        cameras hold the gauge); else from the eigen-decomposition of S, its null space dropped (eigh
+        costs ~100x the Cholesky factorization with multithreaded OpenBLAS on a loaded machine)."""
+        S = 0.5 * (self.S + self.S.T)
+        try:
+            L = np.linalg.cholesky(S)
+            return L.T, -solve_triangular(L, self.s, lower=True)
+        except np.linalg.LinAlgError:
+            lam, V = np.linalg.eigh(S)
+            keep = lam > max(lam[-1], 0.0) * 1e-12
+            return np.sqrt(lam[keep])[:, None] * V[:, keep].T, -(V[:, keep].T @ self.s) / np.sqrt(lam[keep])
+
+    def factor(self, keys: np.ndarray, T_w_c: np.ndarray) -> gtsam.CustomFactor:
+        """One factor on the free cameras' Pose3 keys (`keys[i]` = camera `cams[i]` at `T_w_c[i]`, the
+        linearization point): error (A d - b, floor) with A^T A = S, -A^T b = s (`_square_root`) and d =
+        Local(T_w_c, pose) per camera; half its squared norm is the quadratic model of the static cost."""
+        A, b = self._square_root
+        # the model's minimum as a constant row: the factor's error is the whole quadratic model of the
+        # static cost, 1/2 |A d - b|^2 + cost - 1/2 |b|^2, so that LM's relative decrease is on the full cost
+        floor = np.sqrt(2.0 * max(self.cost - 0.5 * b @ b, 0.0))
+        blocks = [np.ascontiguousarray(A[:, 6 * i:6 * i + 6]) for i in range(len(keys))]
+        lin = [pose3_from_matrix(T) for T in T_w_c]
+        key_list = [int(k) for k in keys]
+
+        def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+            d = np.empty(6 * len(key_list))
+            for i, (key, T0) in enumerate(zip(key_list, lin)):
+                if H is None:
+                    d[6 * i:6 * i + 6] = T0.localCoordinates(values.atPose3(key))
+                else:
+                    J = np.zeros((6, 6), order="F")
+                    d[6 * i:6 * i + 6] = T0.localCoordinates(values.atPose3(key), None, J)
+                    H[i] = np.vstack([blocks[i] @ J, np.zeros((1, 6))])
+            return np.append(A @ d - b, floor)
+
+        return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(len(b) + 1), key_list, error)
+
+    def point_steps(self, d_cams: np.ndarray) -> np.ndarray:
+        """(P', 3) point increments for (C, 6) camera increments: -H_pp^-1 (g_p + sum H_pc d_c)."""
+        rhs = self.g_p + _sum_by(self.obs_point, np.einsum("mij,mi->mj", self.W, d_cams[self.obs_cam]),
+                                 len(self.points))
+        return -np.einsum("pij,pj->pi", self.H_pp_inv, rhs)
+
+
+def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
+                 meas: np.ndarray, inv_sigma2: np.ndarray, camera: StereoCamera, min_depth: float,
+                 delta2: np.ndarray | None, damping: float) -> StaticSchur:
+    """Linearize the given observations at (T_c_w, X_w), with Huber weights as gtsam's Robust model
+    (`delta2`: (M,) delta^2 per observation; None: no kernel), and eliminate their points, each
+    point's block damped as Levenberg-Marquardt's H_pp + damping I (whitened units): the points take one
+    step, and far points (depth information ~1e-6 at a few hundred metres) would otherwise jump by their
+    depth for a millimetre of camera motion; damping 0 is the plain Schur complement (every point
+    determined). `free`: (K,) bool, the cameras kept as variables (the others are constants).
+    Observations closer than `min_depth` contribute nothing."""
+    K = len(T_c_w)
+    R, t = T_c_w[obs_kf, :3, :3], T_c_w[obs_kf, :3, 3]
+    X_c = np.einsum("mij,mj->mi", R, X_w[obs_pt]) + t
+    r = residuals(camera, X_c, meas)
+    x, y, z = X_c.T
+    ok = z > min_depth
+    inv_z = 1.0 / np.where(ok, z, 1.0)
+    w = np.where(ok, inv_sigma2, 0.0)  # information of each observation, times its Huber weight
+    if delta2 is not None:
+        c2 = np.maximum(np.einsum("ij,ij->i", r, r) * inv_sigma2, 1e-300)
+        w = w * np.minimum(1.0, np.sqrt(delta2 / c2))
+    # whitened, Huber-weighted Jacobian rows of [u, v, u_right] on (omega, nu) of T_w_c Exp(omega, nu) and
+    # on X_w: with d pi / d X_c rows (a, 0, c), (0, b, d), (a, 0, e) (the third zero if monocular), the
+    # camera block is [row x [X_c]x, -row] (X_c' = X_c + [X_c]x omega - nu) and the point block row R_c_w
+    sw = np.sqrt(w)
+    stereo = is_stereo(meas)
+    a = sw * camera.fx * inv_z
+    b = sw * camera.fy * inv_z
+    c = -a * x * inv_z
+    d = -b * y * inv_z
+    a2 = np.where(stereo, a, 0.0)
+    e = np.where(stereo, -sw * (camera.fx * x - camera.bf) * inv_z**2, 0.0)
+    J = np.zeros((len(z), 3, 9))
+    J[:, 0, 0], J[:, 0, 1], J[:, 0, 2], J[:, 0, 3], J[:, 0, 5] = -c * y, c * x - a * z, a * y, -a, -c
+    J[:, 1, 0], J[:, 1, 1], J[:, 1, 2], J[:, 1, 4], J[:, 1, 5] = b * z - d * y, d * x, -b * x, -b, -d
+    J[:, 2, 0], J[:, 2, 1], J[:, 2, 2], J[:, 2, 3], J[:, 2, 5] = -e * y, e * x - a2 * z, a2 * y, -a2, -e
+    J[:, 0, 6:] = a[:, None] * R[:, 0] + c[:, None] * R[:, 2]
+    J[:, 1, 6:] = b[:, None] * R[:, 1] + d[:, None] * R[:, 2]
+    J[:, 2, 6:] = a2[:, None] * R[:, 0] + e[:, None] * R[:, 2]
+    r = sw[:, None] * r
+    cost = 0.5 * float(np.einsum("ij,ij->", r, r))
+    JT = J.transpose(0, 2, 1)
+    N = JT @ J  # (M, 9, 9) normal-equation blocks of each observation: [[H_cc, W], [W^T, H_pp]]
+    g = (JT @ r[:, :, None])[:, :, 0]  # (M, 9)
+    points, obs_point = np.unique(obs_pt, return_inverse=True)
+    n_p = len(points)
+    H_pp = _sum_by(obs_point, np.ascontiguousarray(N[:, 6:, 6:]), n_p)
+    g_p = _sum_by(obs_point, g[:, 6:], n_p)
+    H_pp_inv = np.linalg.inv(H_pp + damping * np.eye(3))
+
+    cams = np.flatnonzero(free)
+    C, n = len(cams), 6 * len(cams)
+    cam_row = np.full(K, -1, dtype=np.int64)
+    cam_row[cams] = np.arange(C)
+    on_free = np.flatnonzero(cam_row[obs_kf] >= 0)
+    on_free = on_free[np.lexsort((obs_point[on_free], obs_kf[on_free]))]  # by camera, then point
+    oc, op = cam_row[obs_kf[on_free]], obs_point[on_free]
+    N, g = N[on_free], g[on_free]
+    W = N[:, :6, 6:]  # (M', 6, 3) H_cp block of each observation
+    S = np.zeros((C, 6, C, 6))
+    S[np.arange(C), :, np.arange(C), :] = _sum_by(oc, np.ascontiguousarray(N[:, :6, :6]), C)
+    s = _sum_by(oc, g[:, :6], C).ravel()
+    # reduction sum_p W_p H_pp^-1 W_p^T = U U^T, U = W chol(H_pp^-1): a block-sparse (6C, 3P) matrix whose
+    # 6x3 blocks are the observations in camera then point order (scipy's BSR product: ~3x its CSR one)
+    U = W @ np.linalg.cholesky(H_pp_inv)[op]
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(oc, minlength=C))])
+    Us = sp.bsr_matrix((U, op, indptr), shape=(n, 3 * n_p))
+    S = S.reshape(n, n) - (Us @ Us.T).toarray()
+    s = s - _sum_by(oc, (W @ (H_pp_inv[op] @ g_p[op, :, None]))[:, :, 0], C).ravel()
+    return StaticSchur(cams, S, s, points, H_pp_inv, g_p, oc, op, W, cost)
+
+
+def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """(n, ...) sums of the rows of `values` grouped by `index` (one sparse product)."""
+    m = len(index)
+    group = sp.csr_matrix((np.ones(m), (index, np.arange(m))), shape=(n, m))
+    return np.asarray(group @ values.reshape(m, -1)).reshape((n,) + values.shape[1:])
