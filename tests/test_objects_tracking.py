@@ -154,6 +154,28 @@ def test_instance_box_association_keeps_the_id_when_no_point_matches():
     assert [e.track_id for e in result.estimates] == [max(ids[0]) + 1]
 
 
+def test_box_association_gives_the_track_to_the_instance_it_overlaps_most():
+    """A car that changes appearance (no descriptor matches) while a second car appears beside it,
+    its box overlapping the first car's (IoU > join_iou) and its instance id taken first: the track
+    goes to the first car's instance (mutual best overlap), the second car starts its own; a
+    pedestrian instance never takes a car's track."""
+    rng = np.random.default_rng(6)
+    car = Body(rng, 1005, 80, (4.0, 1.5, 1.5))
+    objects, trk = ObjectMap(), tracker()
+    T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 15.0])) for i in range(8)]
+    for i in range(5):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    car_id = e.track_id
+    car.inst, car.desc = 1009, rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    other = Body(rng, 1002, 80, (4.0, 1.5, 1.5))
+    frame = make_frame(5, [(car, T_car[5]), (other, T_car[5] @ make_pose(np.eye(3), np.array([1.5, 0.0, 0.0])))])
+    ids = {e.instance_id: e.track_id for e in trk.track(frame, None, objects).estimates}
+    assert ids[1009] == car_id and ids[1002] != car_id
+    ped = Body(rng, 2001, 80, (4.0, 1.5, 1.5))  # a pedestrian instance where the car was
+    ids = {e.instance_id: e.track_id for e in trk.track(make_frame(6, [(ped, T_car[6])]), None, objects).estimates}
+    assert car_id not in ids.values()
+
+
 def test_object_creation_thresholds():
     """An instance creates an object only with min_new_points close keypoints with depth; the object
     frame is the centroid of its points with the identity rotation."""

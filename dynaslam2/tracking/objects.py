@@ -7,11 +7,13 @@ Per frame, after the camera is tracked on static features only:
     matched by projection search;
 (b) the others, or those with too few matches in (a): brute-force matching of their points with the
     keypoints of the instance that overlaps their last 2D box most (consecutive frames);
-then one pose-only optimization per object; an instance holds at most one object.
+then one pose-only optimization per object from its matches on one instance (of its class, the
+unclaimed one holding most of them); an instance holds at most one object.
 Unclaimed instances with enough close keypoints with depth become objects, unless their keypoints
-mostly match the points of one map object not seen in this frame (it re-appears: same track id, so
-occlusions keep ids, the matching being against the map, not the previous frame) or their box
-overlaps the box of an object seen in the previous frame (instance-to-instance IoU association).
+mostly match the points of one map object of their class not seen in this frame (it re-appears: same
+track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
+their box overlaps the box of an object of their class seen in the previous frame
+(instance-to-instance IoU association).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynaslam2.classes import CLASS_IDS, CLASS_NAMES, DYNAMIC_CLASSES
+from dynaslam2.classes import CLASS_IDS, CLASS_NAMES, DYNAMIC_CLASSES, INSTANCE_CLASS_FACTOR
 from dynaslam2.config import SlamConfig
 from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
@@ -238,9 +240,7 @@ class ObjectTracker:
         seen: list[int] = []
         for tid in sorted(candidates, key=lambda k: (-len(candidates[k][0]), k)):
             tr = objects.tracks[tid]
-            kp, pts = candidates[tid]
-            ok = free[kp]
-            kp, pts = kp[ok], pts[ok]
+            kp, pts = self._one_instance(frame, tr, *candidates[tid], free, claimed)
             if len(kp) < cfg.min_inliers:
                 continue
             est = self.estimate_pose(frame, objects, tr, pred[tid], kp, pts, robust_init=not tr.velocity_known)
@@ -259,13 +259,29 @@ class ObjectTracker:
         for k, inst in enumerate(inst_ids.tolist()):
             if inst in claimed:
                 continue
-            tid = self._new_object(frame, objects, [tr for tr in active if tr.track_id not in seen], pred,
-                                   inst, boxes[k], boxes, free)
+            cls = CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
+            tid = self._new_object(frame, objects, [tr for tr in active if tr.track_id not in seen and tr.cls == cls],
+                                   pred, inst, boxes[k], boxes, free)
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
         self._cull(objects, seen)
         return self._result(frame, objects, seen, dyn)
+
+    def _one_instance(self, frame: Frame, track: ObjectTrack, kp: np.ndarray, pts: np.ndarray, free: np.ndarray,
+                      claimed: set[int]) -> tuple[np.ndarray, np.ndarray]:
+        """The matches keypoint `kp` <-> point `pts` of `track` kept on one instance: the unclaimed
+        instance of the track's class that holds most of its free matched keypoints. An object is seen
+        on one instance of its class; matches spread over a neighbour (a pedestrian beside a car) took
+        tracks to the neighbour's instance, and a new track was created for the object's own."""
+        inst = frame.instance_id[kp]
+        ok = (free[kp] & (inst // INSTANCE_CLASS_FACTOR == CLASS_IDS[track.cls])
+              & ~np.isin(inst, np.fromiter(claimed, np.int64, len(claimed))))
+        if not ok.any():
+            return kp[:0], pts[:0]
+        ids, counts = np.unique(inst[ok], return_counts=True)
+        keep = ok & (inst == ids[np.argmax(counts)])
+        return kp[keep], pts[keep]
 
     def _keypoint_boxes(self, frame: Frame, dyn: np.ndarray, inst_ids: np.ndarray) -> np.ndarray:
         """Boxes of each instance's keypoints (when the instance image is not given)."""
@@ -436,7 +452,7 @@ class ObjectTracker:
                 return tid
         # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
         # goes on at its constant-velocity prediction; the instance's close keypoints become its points.
-        tr = self._join_by_box(frame, unseen, pred, box, cfg.join_max_gap_s if enough else cfg.coast_max_s)
+        tr = self._join_by_box(frame, unseen, pred, box, boxes, cfg.join_max_gap_s if enough else cfg.coast_max_s)
         if tr is not None:
             T_w_o = pred[tr.track_id]
             if not enough:
@@ -488,11 +504,11 @@ class ObjectTracker:
         return tid
 
     def _join_by_box(self, frame: Frame, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
-                     box: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
+                     box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
         """The unseen track measured within `max_gap_s` whose last box, as it was or moved by its
         predicted image motion (wrong when the velocity is, or for a near object whose origin projects
-        off its visible part), overlaps `box` most, if that IoU is >= join_iou (instance-to-instance
-        association, III-B)."""
+        off its visible part), overlaps `box` most, if that IoU is >= join_iou and no other instance box
+        of the frame (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
         cfg = self.cfg
         recent = [tr for tr in unseen if tr.last.box2d is not None
                   and frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
@@ -502,7 +518,11 @@ class ObjectTracker:
         last = np.array([tr.last.box2d for tr in recent], dtype=float)
         iou = np.maximum(box_iou(np.array([box]), moved)[0], box_iou(np.array([box]), last)[0])
         b = int(np.argmax(iou))
-        return recent[b] if iou[b] >= cfg.join_iou else None
+        if iou[b] < cfg.join_iou:
+            return None
+        # Mutual best: adjacent instances swapped tracks otherwise, the instances being taken in id order.
+        others = np.maximum(box_iou(moved[b:b + 1], boxes)[0], box_iou(last[b:b + 1], boxes)[0])
+        return recent[b] if iou[b] >= others.max() else None
 
     def _cull(self, objects: ObjectMap, track_ids: list[int]) -> None:
         """Drop object points of the tracked objects that are rarely found where they project."""
