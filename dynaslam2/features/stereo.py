@@ -217,44 +217,51 @@ def search_stereo_rows(
         return u_right, depth
     w, h = cfg.sad_window, cfg.sad_half_height
     k, kh = 2 * w + 1, 2 * h + 1
-    scales = level_scales(pyr_left)
     octave = kp_left.octave[idx]
+    sx, sy = level_scales(pyr_left)[octave].T
     u_l = kp_left.uv[idx, 0].astype(np.float64)
+    su = np.rint(base_to_level(u_l, sx)).astype(np.int64)
+    sv = np.rint(base_to_level(kp_left.uv[idx, 1].astype(np.float64), sy)).astype(np.int64)
+    d_lo, d_hi = camera.bf / max_depth_m / sx, camera.bf / min_depth_m / sx  # level disparities
+    L = np.ceil((d_hi - d_lo) / 2.0).astype(np.int64) + 1  # offsets -L..L around the level's mid disparity
+    d_mid = np.rint((d_hi + d_lo) / 2.0).astype(np.int64)
+    # One SAD pass for all levels over the widest range -L_max..L_max (a window's SAD does not depend on
+    # the batch); offsets beyond a keypoint's own +-L are invalid, which leaves the same best, neighbours
+    # and away-minimum as a search over its level's range alone.
+    L_max = int(L.max())
+    first = su - d_mid - L_max  # right column of offset 0
+    patch = np.empty((len(idx), kh, k), pyr_left[0].dtype)
+    strip = np.empty((len(idx), kh, k + 2 * L_max), pyr_right[0].dtype)
+    cols = np.empty(len(idx), np.int64)
     for level in np.unique(octave).tolist():
         sel = np.flatnonzero(octave == level)
-        sx, sy = scales[level]
-        d_lo, d_hi = camera.bf / max_depth_m / sx, camera.bf / min_depth_m / sx  # level disparities
-        L = int(np.ceil((d_hi - d_lo) / 2.0)) + 1
-        d_mid = int(np.rint((d_hi + d_lo) / 2.0))
-        img_r = pyr_right[level]
-        cols = img_r.shape[1]
-        pad = d_mid + L + w + 1  # every strip inside the padded images; offsets off the image masked
-        right = cv2.copyMakeBorder(img_r, h, h, pad, pad, cv2.BORDER_REPLICATE)
+        pad = int(d_mid[sel[0]]) + L_max + w + 1  # every strip inside the padded images; offsets off the image masked
+        right = cv2.copyMakeBorder(pyr_right[level], h, h, pad, pad, cv2.BORDER_REPLICATE)
         left = cv2.copyMakeBorder(pyr_left[level], h, h, w, w, cv2.BORDER_REPLICATE)
-        su = np.rint(base_to_level(u_l[sel], sx)).astype(np.int64)
-        sv = np.rint(base_to_level(kp_left.uv[idx[sel], 1].astype(np.float64), sy)).astype(np.int64)
-        patch = sliding_window_view(left, (kh, k))[sv, su]  # padded: row sv - h + h, column su - w + w
-        first = su - d_mid - L  # right column of offset 0
-        strip = sliding_window_view(right, (kh, k + 2 * L))[sv, first - w + pad]
-        dists = _sad_curve(patch, strip, w, L, cfg.sad_centre).astype(np.float64)
-        col = first[:, None] + np.arange(2 * L + 1)[None]
-        disp = su[:, None] - col
-        valid = (col >= w) & (col < cols - w) & (disp >= d_lo - 1) & (disp <= d_hi + 1)
-        dists[~valid] = np.inf
-        inc, delta, sad, ok = _parabola(np.where(valid, dists, 1e30), L)
-        best = inc + L
-        rr = np.arange(len(sel))
-        away = dists.copy()
-        for o in (-1, 0, 1):
-            away[rr, np.clip(best + o, 0, 2 * L)] = np.inf
-        nb = valid[rr, np.clip(best - 1, 0, 2 * L)] & valid[rr, np.clip(best + 1, 0, 2 * L)]
-        ok &= valid[rr, best] & nb & (sad < cfg.row_search_uniqueness * away.min(axis=1))
-        ok &= np.abs(delta) <= cfg.max_subpixel_delta
-        ur = level_to_base(first + best + delta, sx)
-        disparity = u_l[sel] - ur
-        ok &= disparity > 0
-        u_right[sel[ok]] = ur[ok]
-        depth[sel[ok]] = camera.bf / disparity[ok]
+        patch[sel] = sliding_window_view(left, (kh, k))[sv[sel], su[sel]]  # padded: row sv - h + h, column su - w + w
+        strip[sel] = sliding_window_view(right, (kh, k + 2 * L_max))[sv[sel], first[sel] - w + pad]
+        cols[sel] = pyr_right[level].shape[1]
+    dists = _sad_curve(patch, strip, w, L_max, cfg.sad_centre).astype(np.float64)
+    off = np.arange(2 * L_max + 1)[None]
+    col = first[:, None] + off
+    disp = su[:, None] - col
+    valid = (np.abs(off - L_max) <= L[:, None]) & (col >= w) & (col < cols[:, None] - w)
+    valid &= (disp >= d_lo[:, None] - 1) & (disp <= d_hi[:, None] + 1)
+    dists[~valid] = np.inf
+    inc, delta, sad, ok = _parabola(np.where(valid, dists, 1e30), L_max)
+    best = inc + L_max
+    rr = np.arange(len(idx))
+    away = dists.copy()
+    for o in (-1, 0, 1):
+        away[rr, np.clip(best + o, 0, 2 * L_max)] = np.inf
+    nb = valid[rr, np.clip(best - 1, 0, 2 * L_max)] & valid[rr, np.clip(best + 1, 0, 2 * L_max)]
+    ok &= valid[rr, best] & nb & (sad < cfg.row_search_uniqueness * away.min(axis=1))
+    ok &= np.abs(delta) <= cfg.max_subpixel_delta
+    ur = level_to_base(first + best + delta, sx)
+    disparity = u_l - ur
+    ok &= disparity > 0
+    u_right[ok] = ur[ok]
+    depth[ok] = camera.bf / disparity[ok]
     return u_right, depth
 
 
