@@ -74,9 +74,10 @@ def _gather_patches(img_l, img_r, su_l, sv_l, su_r, w: int, h: int, L: int):
     return ok, patch_l, strip
 
 
-def _sad_curve(patch_l: np.ndarray, strip: np.ndarray, w: int, L: int, centre: str) -> np.ndarray:
+def _sad_curve(patch_l: np.ndarray, strip: np.ndarray, w: int, L: int, centre: str, n_rows=None) -> np.ndarray:
     """(K, 2L+1) SAD of the left (K,kh,k) patch against the right windows at offsets -L..L, both
-    brightness-normalized by their centre pixel ("pixel", ORB-SLAM2) or their mean ("mean")."""
+    brightness-normalized by their centre pixel ("pixel", ORB-SLAM2) or their mean ("mean").
+    `n_rows` ((2L+1,), optional): score only the first n_rows[o] keypoints at offset o, inf for the rest."""
     K, kh = patch_l.shape[:2]
     k, n_off = 2 * w + 1, 2 * L + 1
     patch_l = patch_l.astype(np.float32)
@@ -90,12 +91,19 @@ def _sad_curve(patch_l: np.ndarray, strip: np.ndarray, w: int, L: int, centre: s
         ref_r = (col_sum[:, k:] - col_sum[:, :-k]) / (kh * k)  # box mean of the window at each offset
     centred_l = patch_l - ref_l[:, None, None]
     rows_r = strip.reshape(K * kh, k + 2 * L)  # all strips stacked: offset o = columns o..o+k-1
-    dists = np.empty((K, n_off), np.float32)
-    for o in range(n_off):  # loop over the 2L+1 offsets, vectorized (OpenCV) over keypoints
-        target = (centred_l + ref_r[:, o, None, None]).reshape(K * kh, k)
-        absdiff = cv2.absdiff(rows_r[:, o : o + k], target).reshape(K, kh * k)
-        dists[:, o] = cv2.reduce(absdiff, 1, cv2.REDUCE_SUM).ravel()
-    return dists
+    ref_r = np.ascontiguousarray(ref_r.T)[:, :, None, None]  # (2L+1, K, 1, 1)
+    n_rows = np.full(n_off, K) if n_rows is None else n_rows
+    dists = np.full((n_off, K, 1), np.inf, np.float32)
+    target = np.empty((K, kh, k), np.float32)
+    absdiff = np.empty((K * kh, k), np.float32)
+    for o in range(n_off):  # loop over the 2L+1 offsets, vectorized (OpenCV) over keypoints, into buffers
+        n = int(n_rows[o])
+        if n == 0:
+            continue
+        np.add(centred_l[:n], ref_r[o, :n], out=target[:n])
+        cv2.absdiff(rows_r[: n * kh, o : o + k], target[:n].reshape(n * kh, k), dst=absdiff[: n * kh])
+        cv2.reduce(absdiff[: n * kh].reshape(n, kh * k), 1, cv2.REDUCE_SUM, dst=dists[o, :n])
+    return dists[:, :, 0].T
 
 
 def _parabola(dists: np.ndarray, L: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -217,18 +225,23 @@ def search_stereo_rows(
         return u_right, depth
     w, h = cfg.sad_window, cfg.sad_half_height
     k, kh = 2 * w + 1, 2 * h + 1
-    octave = kp_left.octave[idx]
-    sx, sy = level_scales(pyr_left)[octave].T
-    u_l = kp_left.uv[idx, 0].astype(np.float64)
-    su = np.rint(base_to_level(u_l, sx)).astype(np.int64)
-    sv = np.rint(base_to_level(kp_left.uv[idx, 1].astype(np.float64), sy)).astype(np.int64)
-    d_lo, d_hi = camera.bf / max_depth_m / sx, camera.bf / min_depth_m / sx  # level disparities
-    L = np.ceil((d_hi - d_lo) / 2.0).astype(np.int64) + 1  # offsets -L..L around the level's mid disparity
-    d_mid = np.rint((d_hi + d_lo) / 2.0).astype(np.int64)
+    scales = level_scales(pyr_left)
+    lv_lo, lv_hi = camera.bf / max_depth_m / scales[:, 0], camera.bf / min_depth_m / scales[:, 0]  # level disparities
+    lv_L = np.ceil((lv_hi - lv_lo) / 2.0).astype(np.int64) + 1  # offsets -L..L around the level's mid disparity
     # One SAD pass for all levels over the widest range -L_max..L_max (a window's SAD does not depend on
-    # the batch); offsets beyond a keypoint's own +-L are invalid, which leaves the same best, neighbours
-    # and away-minimum as a search over its level's range alone.
+    # the batch); offsets beyond a keypoint's own +-L are invalid (not scored: keypoints ordered by
+    # decreasing L, each offset scores a prefix), which leaves the same best, neighbours and
+    # away-minimum as a search over its level's range alone.
+    order = np.argsort(-lv_L[kp_left.octave[idx]], kind="stable")
+    octave = kp_left.octave[idx[order]]
+    sx, sy = scales[octave].T
+    d_lo, d_hi, L = lv_lo[octave], lv_hi[octave], lv_L[octave]
+    u_l = kp_left.uv[idx[order], 0].astype(np.float64)
+    su = np.rint(base_to_level(u_l, sx)).astype(np.int64)
+    sv = np.rint(base_to_level(kp_left.uv[idx[order], 1].astype(np.float64), sy)).astype(np.int64)
+    d_mid = np.rint((d_hi + d_lo) / 2.0).astype(np.int64)
     L_max = int(L.max())
+    off = np.arange(2 * L_max + 1)
     first = su - d_mid - L_max  # right column of offset 0
     patch = np.empty((len(idx), kh, k), pyr_left[0].dtype)
     strip = np.empty((len(idx), kh, k + 2 * L_max), pyr_right[0].dtype)
@@ -241,11 +254,11 @@ def search_stereo_rows(
         patch[sel] = sliding_window_view(left, (kh, k))[sv[sel], su[sel]]  # padded: row sv - h + h, column su - w + w
         strip[sel] = sliding_window_view(right, (kh, k + 2 * L_max))[sv[sel], first[sel] - w + pad]
         cols[sel] = pyr_right[level].shape[1]
-    dists = _sad_curve(patch, strip, w, L_max, cfg.sad_centre).astype(np.float64)
-    off = np.arange(2 * L_max + 1)[None]
-    col = first[:, None] + off
+    in_range = np.abs(off - L_max)[None] <= L[:, None]
+    dists = _sad_curve(patch, strip, w, L_max, cfg.sad_centre, in_range.sum(axis=0)).astype(np.float64)
+    col = first[:, None] + off[None]
     disp = su[:, None] - col
-    valid = (np.abs(off - L_max) <= L[:, None]) & (col >= w) & (col < cols[:, None] - w)
+    valid = in_range & (col >= w) & (col < cols[:, None] - w)
     valid &= (disp >= d_lo[:, None] - 1) & (disp <= d_hi[:, None] + 1)
     dists[~valid] = np.inf
     inc, delta, sad, ok = _parabola(np.where(valid, dists, 1e30), L_max)
@@ -260,8 +273,8 @@ def search_stereo_rows(
     ur = level_to_base(first + best + delta, sx)
     disparity = u_l - ur
     ok &= disparity > 0
-    u_right[ok] = ur[ok]
-    depth[ok] = camera.bf / disparity[ok]
+    u_right[order[ok]] = ur[ok]
+    depth[order[ok]] = camera.bf / disparity[ok]
     return u_right, depth
 
 
