@@ -53,12 +53,10 @@ class FrameBuilder:
         if data.right is None and data.depth is None:
             raise InputError(f"frame {data.index}: needs a right image or a depth image")
 
-    def _row_search(self, kp, dyn: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray) -> None:
-        """Depth by row search (stereo.dynamic_row_search) for the keypoints on dynamic instances that
-        `match_stereo` left without; fills `u_right` and `depth` in place."""
-        col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
-        row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
-        idx = np.flatnonzero(dyn[row, col] & (depth <= 0))
+    def _row_search(self, kp, on_dyn: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray) -> None:
+        """Depth by row search (stereo.dynamic_row_search) for the keypoints on dynamic instances
+        (`on_dyn`) that `match_stereo` left without; fills `u_right` and `depth` in place."""
+        idx = np.flatnonzero(on_dyn & (depth <= 0))
         ur, z = search_stereo_rows(kp, idx, pyr_l, pyr_r, self.camera, self.config.stereo,
                                    self.config.stereo.row_search_min_depth_m, self.config.objects.max_point_depth_m)
         found = z > 0
@@ -83,26 +81,25 @@ class FrameBuilder:
             pyr_r = self.extractor.build_pyramid(to_gray(data.right))
             kp, kp_r = self.extractor.extract_pair(pyr_l, pyr_r, mask, self.n_features_right)
         t1 = time.perf_counter()
+        n = len(kp)
+        col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
+        row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
+        on_dyn = dyn[row, col] if dyn is not None else np.zeros(n, dtype=bool)
         if use_depth:
             u_right, depth = depth_from_image(kp, data.depth, self.camera)
         else:
             u_right, depth = match_stereo(kp, kp_r, pyr_l, pyr_r, self.camera, self.extractor.scale_factors,
                                           self.config.stereo)
-            if dyn is not None and mode == "dynamic" and self.config.stereo.dynamic_row_search:
-                self._row_search(kp, dyn, pyr_l, pyr_r, u_right, depth)
+            if mode == "dynamic" and self.config.stereo.dynamic_row_search:
+                self._row_search(kp, on_dyn, pyr_l, pyr_r, u_right, depth)
         t2 = time.perf_counter()
-        n = len(kp)
-        col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
-        row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
         if data.instances is not None:
             instance_id = data.instances[row, col].astype(np.int64)
             class_id = instance_class_id(instance_id)
         else:
             instance_id = np.zeros(n, dtype=np.int64)
             class_id = np.zeros(n, dtype=np.int64)
-        static = np.ones(n, dtype=bool)
-        if mode == "dynamic" and dyn is not None:
-            static = ~dyn[row, col]
+        static = ~on_dyn if mode == "dynamic" else np.ones(n, dtype=bool)
         timing_ms["features"] = (t1 - t0) * 1e3
         timing_ms["stereo"] = (t2 - t1) * 1e3
         return Frame(
