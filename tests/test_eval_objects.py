@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 from dynaslam2.classes import CLASS_IDS
 from dynaslam2.cli import main
 from dynaslam2.errors import InputError
-from dynaslam2.eval.objects import ObjectEvalConfig, box_iou, evaluate_object_tracks, evaluate_objects, track_errors
+from dynaslam2.eval.objects import PAPER_PROTOCOL, ObjectEvalConfig, box_iou, evaluate_object_tracks, evaluate_objects, track_errors
 from dynaslam2.eval.report import evaluate, format_table
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, make_pose, se3_exp, so3_exp
@@ -181,6 +182,27 @@ def test_id_switch_reid_after_occlusion_missing_track_and_range():
     wide = evaluate_scene(scene, est, T_w_c_est, max_range_m=60.0, min_visible_frames=5)
     assert set(wide["per_track"]) == {"1", "2", "3", "4", "5"}
     assert wide["per_track"]["4"]["tp_ratio"] == 1.0 and wide["per_track"]["5"]["matched_est_id"] == 50
+
+
+def test_paper_protocol_scores_only_unoccluded_untruncated_frames_at_least_40_px_high():
+    n = 30
+    scene = Scene(n, three_cars(n))
+    est, T_w_c_est = scene.estimate({g: {i: 10 + g for i in range(n) if i < 20} for g in (1, 2, 3)})
+    # Track 1 partly occluded in frames 0-9, track 2 truncated in frames 0-24, track 3 always < 40 px.
+    for i, frame in enumerate(scene.gt):
+        for k, g in enumerate(frame):
+            l, t, r, b = g.box2d
+            box = (l, t, r, t + (30.0 if g.track_id == 3 else max(b - t, 45.0)))
+            frame[k] = dataclasses.replace(g, box2d=box, occlusion=int(g.track_id == 1 and i < 10),
+                                           truncation=0.3 if g.track_id == 2 and i < 25 else 0.0)
+    every = evaluate_scene(scene, est, T_w_c_est)
+    assert set(every["per_track"]) == {"1", "2", "3"}
+    assert every["tp_ratio"] == pytest.approx(20 / 30)
+    paper = evaluate_object_tracks(scene.gt, scene.T_w_c, scene.times, est, T_w_c_est, PAPER_PROTOCOL)
+    # Track 1 is scored over frames 10-29 (tracked in 10-19), track 2 has 5 frames (< 10): not scored.
+    assert set(paper["per_track"]) == {"1"}
+    assert paper["per_track"]["1"]["visible_frames"] == 20
+    assert paper["per_track"]["1"]["tp_ratio"] == pytest.approx(10 / 20)
 
 
 def test_box_iou_matching_without_instance_ids():

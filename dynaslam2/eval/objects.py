@@ -3,8 +3,11 @@
 Definitions (parameters in ObjectEvalConfig):
 - A GT object counts at a frame ("eligible") when it is listed in the sequence's GT at that frame
   (our sequences list objects with at least one visible pixel), its box centre lies within
-  `max_range_m` of the camera, its visible fraction is >= `min_visible_fraction` (unknown passes) and
-  its 2D box is >= `min_box_height_px` high. A GT track is scored when it is eligible in at least
+  `max_range_m` of the camera, its visible fraction is >= `min_visible_fraction` (unknown passes), its
+  KITTI occlusion level is <= `max_occlusion`, its truncation is <= `max_truncation` (unknown passes)
+  and its 2D box is >= `min_box_height_px` high. The defaults score every listed object within 30 m,
+  however small or hidden; `PAPER_PROTOCOL` adds the selection of the paper's Table IV (IV-B:
+  detections "neither occluded nor truncated, and whose height is at least 40 pixels"). A GT track is scored when it is eligible in at least
   `min_visible_frames` frames; its eligible frames are its "visible frames".
 - Overlap of an estimated object with a GT object at a frame: when the estimate carries an instance id
   (and `use_instance_ids`), that id equals the GT's MOTS id `class_id*1000 + track_id`; otherwise the IoU
@@ -61,6 +64,12 @@ class ObjectEvalConfig:
     use_instance_ids: bool = True
     min_visible_fraction: float = 0.0
     min_box_height_px: float = 0.0
+    max_occlusion: int = 3  # KITTI levels: 0 fully visible, 1 partly, 2 largely occluded, 3 unknown
+    max_truncation: float = 1.0
+
+
+# Paper IV-B (Table IV): objects neither occluded nor truncated and at least 40 px high (within 30 m here).
+PAPER_PROTOCOL = ObjectEvalConfig(min_box_height_px=40.0, max_occlusion=0, max_truncation=0.0)
 
 
 def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
@@ -127,6 +136,8 @@ def track_errors(T_est: np.ndarray, T_gt: np.ndarray, frames: np.ndarray) -> dic
 def _eligible(obj: ObjectState, T_c_w_gt: np.ndarray, config: ObjectEvalConfig) -> bool:
     range_m = np.linalg.norm(T_c_w_gt[:3, :3] @ np.asarray(obj.T_w_o, dtype=float)[:3, 3] + T_c_w_gt[:3, 3])
     if range_m > config.max_range_m or obj.visible_fraction < config.min_visible_fraction:
+        return False
+    if obj.occlusion > config.max_occlusion or obj.truncation > config.max_truncation:
         return False
     if config.min_box_height_px > 0.0:
         return obj.box2d is not None and obj.box2d[3] - obj.box2d[1] >= config.min_box_height_px
