@@ -204,13 +204,14 @@ class System:
     def _local_mapping(self, frame: Frame, kf, camera_weak: bool, object_weak: list[int]) -> dict[str, float]:
         """Local mapping of a new keyframe with the BA case of III-D: camera weak only -> the static
         local BA; an object weak -> BA with objects (object-weak only: the weak objects and the
-        cameras of the last `optim.objects.tail_seconds`; both: everything jointly), after the static
-        local BA when `objects.static_ba_first`."""
+        cameras of the last `optim.objects.tail_seconds`; both: everything jointly, after the static
+        local BA when `objects.static_ba_first`)."""
         if self.object_tracker is None:
             return self.mapper.process(kf, self.map)
         self.object_tracker.on_keyframe(frame, kf.id, self.objects, object_weak)
         with_objects = bool(object_weak) and self.config.objects.ba
-        mapping_ms = self.mapper.process(kf, self.map, static_ba=not with_objects or self.config.objects.static_ba_first)
+        static_ba = not with_objects or (camera_weak and self.config.objects.static_ba_first)
+        mapping_ms = self.mapper.process(kf, self.map, static_ba=static_ba)
         if with_objects:
             t0 = time.perf_counter()
             object_local_ba(kf, self.map, self.objects, object_weak, camera_weak, self.mapper, self.config)
