@@ -60,8 +60,8 @@ reduced joint BA, the static reduction is ~1/2 (per-observation Jacobians and no
 ~2/3 of it, the block-sparse product ~1/4), LM on cameras and objects (3-4 iterations, the eq. (4)
 Python factors ~1/4 of it) ~1/5, the chi2 and cost evaluations of the static observations ~1/5. The
 exact joint form spends ~60% of each LM iteration in gtsam's elimination of the ~4000 points and
-~100 ms per stage building the stereo factors. Synthetic window (`bench_object_ba.py`: 10 keyframes,
-1500 static points, 4 objects x 80 points, no static BA first: exact form): ~0.6 s for the joint BA
+~100 ms building the robust stage's stereo factors (the refine stage: C++-built projection pairs).
+Synthetic window (`bench_object_ba.py`: 10 keyframes, 1500 static points, 4 objects x 80 points, no static BA first: exact form): ~0.6 s for the joint BA
 against ~0.25 s for the static local BA, ~0.4 s for object-weak only; the "direct" eq. (2) form ~5x
 slower, eq. (4) with the points as variables ~5x slower. Object-weak only: half of each iteration is
 the Python factors (one pose-only factor per camera, ~0.8 ms per linearization).
