@@ -7,8 +7,9 @@ Definitions (parameters in ObjectEvalConfig):
   KITTI occlusion level is <= `max_occlusion`, its truncation is <= `max_truncation` (unknown passes)
   and its 2D box is >= `min_box_height_px` high. The defaults score every listed object within 30 m,
   however small or hidden; `PAPER_PROTOCOL` adds the selection of the paper's Table IV (IV-B:
-  detections "neither occluded nor truncated, and whose height is at least 40 pixels"). A GT track is scored when it is eligible in at least
-  `min_visible_frames` frames; its eligible frames are its "visible frames".
+  detections "neither occluded nor truncated, and whose height is at least 40 pixels"). A GT track is
+  scored when it is eligible in at least `min_visible_frames` frames; its eligible frames are its
+  "visible frames".
 - Overlap of an estimated object with a GT object at a frame: when the estimate carries an instance id
   (and `use_instance_ids`), that id equals the GT's MOTS id `class_id*1000 + track_id`; otherwise the IoU
   of the two 2D boxes is >= `min_iou` (the paper's 25 %).

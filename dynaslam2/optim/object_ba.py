@@ -61,9 +61,10 @@ reduced joint BA, the static reduction is ~1/2 (per-observation Jacobians and no
 Python factors ~1/4 of it) ~1/5, the chi2 and cost evaluations of the static observations ~1/5. The
 exact joint form spends ~60% of each LM iteration in gtsam's elimination of the ~4000 points and
 ~100 ms building the robust stage's stereo factors (the refine stage: C++-built projection pairs).
-Synthetic window (`bench_object_ba.py`: 10 keyframes, 1500 static points, 4 objects x 80 points, no static BA first: exact form): ~0.6 s for the joint BA
-against ~0.25 s for the static local BA, ~0.4 s for object-weak only; the "direct" eq. (2) form ~5x
-slower, eq. (4) with the points as variables ~5x slower. Object-weak only: half of each iteration is
+Synthetic window (`bench_object_ba.py`: 10 keyframes, 1500 static points, 4 objects x 80 points, no
+static BA first: exact form): ~0.6 s for the joint BA against ~0.25 s for the static local BA, ~0.4 s
+for object-weak only; the "direct" eq. (2) form ~5x slower, eq. (4) with the points as variables ~5x
+slower. Object-weak only: half of each iteration is
 the Python factors (one pose-only factor per camera, ~0.8 ms per linearization).
 """
 
@@ -89,7 +90,7 @@ from dynaslam2.optim.gtsam_utils import (
     insert_poses,
     lm_params,
 )
-from dynaslam2.optim.local_ba import FIXED_POSE_SIGMA, BAProblem, local_bundle_adjustment
+from dynaslam2.optim.local_ba import FIXED_POSE_SIGMA, BAProblem, _determined, local_bundle_adjustment
 from dynaslam2.optim.object_factors import (
     direct_projection_factor,
     motion_factor,
@@ -421,10 +422,7 @@ def _static_reduction(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarra
     Huber kernel (`cfg.objects.static_reduced`); also the (M,) static observations it uses: in front of
     the camera, of determined points."""
     _, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
-    use = depth > cfg.min_depth
-    n_obs = np.bincount(problem.obs_pt[use], minlength=len(est.X_w))
-    n_st = np.bincount(problem.obs_pt[use & is_stereo(problem.meas)], minlength=len(est.X_w))
-    use &= ((n_obs >= 2) | (n_st >= 1))[problem.obs_pt]
+    use = _determined(problem, depth > cfg.min_depth, is_stereo(problem.meas))
     free = ~fixed & (np.bincount(problem.obs_kf[use], minlength=len(fixed)) > 0)
     schur = static_schur(est.T_c_w, free, est.X_w, problem.obs_kf[use], problem.obs_pt[use], problem.meas[use],
                          problem.inv_sigma2[use], camera, cfg.min_depth, th[use], cfg.objects.static_point_damping)
