@@ -62,7 +62,10 @@ class StereoConfig:
     sad_half_height: int = 2
     sad_search: int = 5  # SAD search +-5 px around the descriptor match, at the keypoint's level
     sad_centre: Literal["mean", "pixel"] = "mean"  # subtract each patch's mean (or centre pixel, ORB-SLAM2)
-    max_subpixel_delta: float = 1.0  # parabola vertex further than this from the best SAD offset: rejected
+    # Sub-pixel minimum of the SAD curve: "equiangular" (V fit, the shape of a SAD minimum) or "parabola"
+    # (ORB-SLAM2; biased towards whole-pixel disparities, see features.stereo).
+    subpixel: Literal["equiangular", "parabola"] = "equiangular"
+    max_subpixel_delta: float = 1.0  # sub-pixel vertex further than this from the best SAD offset: rejected
     outlier_sad_factor: float = 1.5 * 1.4  # reject matches with SAD > factor * median SAD
     th_depth_baselines: float = 40.0
     right_features_factor: float = 1.0  # right-image ORB budget = factor x orb.n_features (more: more depths)

@@ -393,9 +393,9 @@ def test_stereo_on_slanted_plane_keeps_corners_unbiased():
     assert np.median(np.abs(flat)) < 0.05 and np.mean(np.abs(flat) > 0.5) < 0.01
 
 
-def test_stereo_on_rendered_pair_against_ground_truth_depth(extractor):
-    """Simulated street (static scenario, 640x480): disparities at keypoints vs the rendered metric depth,
-    on keypoints whose 5x5 neighbourhood has a smooth depth (a corner on a depth edge has no single GT)."""
+@pytest.fixture(scope="module")
+def rendered_street():
+    """One rendered stereo frame of the simulated static street (640x480) and its camera."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     pytest.importorskip("mujoco")
     from sim.render import StereoRenderer
@@ -409,10 +409,15 @@ def test_stereo_on_rendered_pair_against_ground_truth_depth(extractor):
     width, height = cfg.image_size
     with StereoRenderer(world, width, height) as renderer:
         frame = renderer.render(world.ego_T_m_c(0.0), (fx, fy, cx, cy))
-    camera = StereoCamera(fx, fy, cx, cy, cfg.baseline, width, height)
+    return frame, StereoCamera(fx, fy, cx, cy, cfg.baseline, width, height)
+
+
+def _rendered_disparity_errors(frame, camera, extractor, cfg: StereoConfig):
+    """Signed disparity errors and true disparities at keypoints whose 5x5 neighbourhood has a smooth
+    rendered depth (a corner on a depth edge has no single GT), and whether the keypoint is on level 0."""
     pyr_l, pyr_r = extractor.build_pyramid(frame.left), extractor.build_pyramid(frame.right)
     kp_l, kp_r = extractor.extract_pair(pyr_l, pyr_r)
-    u_right, depth = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, StereoConfig())
+    u_right, depth = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, cfg)
     has = depth > 0
     assert has.mean() > 0.5, has.mean()
     u, v = np.rint(kp_l.uv[has]).astype(int).T
@@ -421,11 +426,36 @@ def test_stereo_on_rendered_pair_against_ground_truth_depth(extractor):
     z_min = -cv2.dilate(-np.where(z_gt > 0, z_gt, np.float32(1e9)), np.ones((5, 5), np.uint8))
     smooth = (z_gt[v, u] > 0) & (z_max[v, u] < 1.05 * z_min[v, u])
     assert smooth.sum() > 500
-    err = np.abs(kp_l.uv[has, 0] - u_right[has] - camera.bf / np.where(smooth, z_gt[v, u], 1.0))[smooth]
-    level0 = kp_l.octave[has][smooth] == 0
+    d_gt = camera.bf / z_gt[v, u][smooth]
+    err = (kp_l.uv[has, 0] - u_right[has])[smooth] - d_gt
+    return err, d_gt, kp_l.octave[has][smooth] == 0
+
+
+def test_stereo_on_rendered_pair_against_ground_truth_depth(rendered_street, extractor):
+    """Simulated street (static scenario, 640x480): disparities at keypoints vs the rendered metric depth."""
+    err, _, level0 = _rendered_disparity_errors(*rendered_street, extractor, StereoConfig())
+    err = np.abs(err)
     assert np.median(err) < 0.25, np.median(err)
     assert np.median(err[level0]) < 0.15, np.median(err[level0])
     assert np.mean(err < 1.0) > 0.9, np.mean(err < 1.0)
+
+
+def _locking_bias(err: np.ndarray, d_gt: np.ndarray) -> np.ndarray:
+    """Median signed error of the keypoints whose true disparity has a fractional part in [0.2, 0.4) and
+    in [0.6, 0.8): a fit pulled towards whole pixels errs negative, then positive."""
+    frac = d_gt % 1.0
+    return np.array([np.median(err[(frac >= lo) & (frac < lo + 0.2)]) for lo in (0.2, 0.6)])
+
+
+def test_stereo_subpixel_fit_has_no_pixel_locking(rendered_street, extractor):
+    """Level-0 keypoints of the rendered street: the equiangular fit's error does not depend on where the
+    true disparity falls between whole pixels; the parabola's (ORB-SLAM2) is pulled towards them."""
+    err, d_gt, level0 = _rendered_disparity_errors(*rendered_street, extractor, StereoConfig())
+    bias = _locking_bias(err[level0], d_gt[level0])
+    assert np.all(np.abs(bias) < 0.04), bias
+    err_p, d_gt_p, level0_p = _rendered_disparity_errors(*rendered_street, extractor, StereoConfig(subpixel="parabola"))
+    bias_p = _locking_bias(err_p[level0_p], d_gt_p[level0_p])
+    assert bias_p[0] < -0.06 and bias_p[1] > 0.06, bias_p
 
 
 def test_stereo_rejects_mismatched_sizes(extractor):
