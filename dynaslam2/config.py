@@ -383,6 +383,9 @@ class ObjectsConfig:
     min_join_matches: int = 6
     join_iou: float = 0.3
     join_max_gap_s: float = 0.5
+    # A track joined by box IoU is translated from its prediction onto the instance's keypoints that
+    # match its points (3D offsets), when at least this many agree.
+    register_min_matches: int = 3
     # An instance with fewer than min_inliers close keypoints keeps (by box IoU) a track measured
     # within coast_max_s at its constant-velocity prediction, without new points (0: never).
     coast_max_s: float = 0.0
@@ -434,7 +437,7 @@ class ObjectsConfig:
 
     def validate(self) -> None:
         for name in ("min_new_points", "min_projection_matches", "min_inliers", "min_join_matches",
-                     "ransac_hypotheses", "kf_min_frames"):
+                     "register_min_matches", "ransac_hypotheses", "kf_min_frames"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"objects.{name}: expected a positive integer, got {getattr(self, name)}")
         if self.min_inliers < 3:

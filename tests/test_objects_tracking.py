@@ -327,6 +327,38 @@ def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong
 
 
 
+@pytest.mark.parametrize("register", [True, False])
+def test_box_association_registers_the_prediction_on_matched_points(register):
+    """A car whose prediction is 1.5 m off in depth and whose appearance changes but for 4 points (too
+    few for association by points) joins its track by box IoU. The pose is translated onto the 4 matched
+    points, so the points added from the new appearance sit on the body and the next frames stay exact;
+    without the registration they are placed at the wrong prediction and the error stays."""
+    rng = np.random.default_rng(11)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.3 * i, 0.8, 15.0])) for i in range(7)]
+    objects = ObjectMap()
+    trk = tracker("objects.filter=false", f"objects.register_min_matches={3 if register else 1000}")
+    for i in range(4):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    tr = objects.tracks[e.track_id]
+    T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
+    tr.last.v_o = tr.last.v_o + np.array([0.0, 0.0, 15.0])  # prediction 1.5 m too far
+    kept = rng.choice(len(car.desc), 4, replace=False)
+    new_desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    new_desc[kept] = car.desc[kept]
+    car.desc = new_desc
+    errors = []
+    for i in range(4, 7):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+        assert e.track_id == tr.track_id
+        errors.append(np.linalg.norm(e.T_w_o[:3, 3] - (T_car[i] @ T_off)[:3, 3]))
+    assert not tr.observations[4].measured
+    if register:
+        assert max(errors) < 0.05, errors
+    else:
+        assert min(errors) > 1.0, errors
+
+
 @pytest.mark.parametrize("gate", [16.27, float("inf")])
 def test_validation_gate_rejects_an_association_outlier(gate):
     """Frame 8 shows the car's keypoints 1.5 m deeper than its constant-velocity motion allows (a wrong

@@ -451,15 +451,18 @@ class ObjectTracker:
             if tid is not None:
                 return tid
         # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
-        # goes on at its constant-velocity prediction; the instance's close keypoints become its points.
+        # goes on at its constant-velocity prediction, registered on the keypoints that match its points;
+        # the instance's other close keypoints become its points.
         tr = self._join_by_box(frame, unseen, pred, box, boxes, cfg.join_max_gap_s if enough else cfg.coast_max_s)
         if tr is not None:
-            T_w_o = pred[tr.track_id]
             if not enough:
                 kp, X_w = kp[:0], X_w[:0]
-            new = objects.add_points(tr.track_id, (X_w - T_w_o[:3, 3]) @ T_w_o[:3, :3], frame.keypoints.desc[kp],
-                                     self._depth_weight(frame, kp))
-            self._observe(frame, objects, tr, T_w_o, kp, new, inst, box, measured=False)
+            T_w_o, kp_in, pt_in = self._register(frame, objects, tr, pred[tr.track_id], kp, X_w)
+            rest = ~np.isin(kp, kp_in)
+            new = objects.add_points(tr.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
+                                     frame.keypoints.desc[kp[rest]], self._depth_weight(frame, kp[rest]))
+            self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box,
+                          measured=False)
             free[kp] = False
             return tr.track_id
         if len(kp) < cfg.min_new_points and not (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
@@ -502,6 +505,27 @@ class ObjectTracker:
         self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box)
         free[kp] = False
         return tid
+
+    def _register(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                  kp: np.ndarray, X_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The predicted pose of `track` translated so that its points matched to keypoints `kp` (world
+        points `X_w`) land on them, with the inlier keypoints and points: the mean offset of the matches
+        within ransac_inlier_m of the median offset, when >= register_min_matches. Else the prediction and
+        no match: points added at a wrong prediction disagree with the object's others, and the next
+        pose-only optimizations jump between the two sets."""
+        cfg = self.cfg
+        none = np.zeros(0, np.int64)
+        pts = objects.points.of_track(track.track_id)
+        m = match_descriptors(objects.points.desc[pts], frame.keypoints.desc[kp], cfg.bf_max_distance, cfg.bf_nn_ratio)
+        if len(m) < cfg.register_min_matches:
+            return T_w_o_pred, none, none
+        offset = X_w[m[:, 1]] - (objects.points.X_o[pts[m[:, 0]]] @ T_w_o_pred[:3, :3].T + T_w_o_pred[:3, 3])
+        inl = np.linalg.norm(offset - np.median(offset, axis=0), axis=1) < cfg.ransac_inlier_m
+        if np.count_nonzero(inl) < cfg.register_min_matches:
+            return T_w_o_pred, none, none
+        T_w_o = T_w_o_pred.copy()
+        T_w_o[:3, 3] += offset[inl].mean(axis=0)
+        return T_w_o, kp[m[inl, 1]], pts[m[inl, 0]]
 
     def _join_by_box(self, frame: Frame, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                      box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
