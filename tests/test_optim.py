@@ -81,11 +81,12 @@ def test_pose_only_bad_input():
         optimize_pose(np.eye(3), X_w, obs.meas, obs.inv_sigma2, CAMERA, OptimConfig())
 
 
-def test_pose_only_factor_jacobian_and_huber():
+@pytest.mark.parametrize("disparity_weight", [None, 3.0])
+def test_pose_only_factor_jacobian_and_huber(disparity_weight):
     X_w, obs, T_init = pose_problem(5, 40, 0.5, 0.3)
     values = gtsam.Values()
     values.insert(0, pose3_from_matrix(inverse(T_init)))
-    plain = pose_only_factor(0, X_w, obs.meas, obs.inv_sigma2, None, CAMERA, 1e-3)
+    plain = pose_only_factor(0, X_w, obs.meas, obs.inv_sigma2, None, CAMERA, 1e-3, disparity_weight)
     A, b = plain.linearize(values).jacobian()
     e0 = plain.unwhitenedError(values)
     assert np.allclose(b, -e0)
@@ -99,7 +100,7 @@ def test_pose_only_factor_jacobian_and_huber():
     assert np.allclose(A, J_num, atol=1e-4 * np.abs(A).max())
     # Huber: the linearization is reweighted per observation by sqrt(min(1, delta / |r|)), the error is the Huber cost
     delta2 = 5.991
-    robust = pose_only_factor(0, X_w, obs.meas, obs.inv_sigma2, np.full(40, delta2), CAMERA, 1e-3)
+    robust = pose_only_factor(0, X_w, obs.meas, obs.inv_sigma2, np.full(40, delta2), CAMERA, 1e-3, disparity_weight)
     A_r, b_r = robust.linearize(values).jacobian()
     obs_of_row = np.repeat(np.arange(40), np.where(obs.meas[:, 2] >= 0, 3, 2))
     c2 = np.bincount(obs_of_row, weights=e0**2)
@@ -107,6 +108,42 @@ def test_pose_only_factor_jacobian_and_huber():
     sqrt_w = np.sqrt(np.minimum(1.0, np.sqrt(delta2 / c2)))[obs_of_row]
     assert np.allclose(A_r, A * sqrt_w[:, None]) and np.allclose(b_r, b * sqrt_w)
     assert np.isclose(robust.error(values), huber_cost(c2, delta2).sum())
+
+
+def test_pose_only_factor_disparity_residual():
+    """With a disparity weight k the third residual of a stereo row is k (bf / z - (u - u_right)), whitened."""
+    X_w, obs, T_init = pose_problem(6, 30, 1.0, 0.0)
+    st = obs.meas[:, 2] >= 0
+    values = gtsam.Values()
+    values.insert(0, pose3_from_matrix(inverse(T_init)))
+    factor = pose_only_factor(0, X_w[st], obs.meas[st], obs.inv_sigma2[st], None, CAMERA, 1e-3, 3.0)
+    e = factor.unwhitenedError(values).reshape(-1, 3)
+    z = transform(T_init, X_w[st])[:, 2]
+    expected = 3.0 * (CAMERA.bf / z - (obs.meas[st, 0] - obs.meas[st, 2])) * np.sqrt(obs.inv_sigma2[st])
+    np.testing.assert_allclose(e[:, 2], expected, rtol=1e-9, atol=1e-9)
+
+
+def test_pose_only_disparity_weight_rejects_depth_outliers():
+    """A distant object (25-28 m, 15 stereo points, keypoints with 0.7 px noise that the right coordinate
+    shares): two points whose disparity is 1.5 px too large pass the chi2 test of the isotropic
+    [u, v, u_right] residual and pull the pose along the viewing axis; with the disparity at sigma / 3
+    they are outliers. 5 seeds (measured: mean depth error 0.30 m against 0.035 m)."""
+    err = {None: [], 3.0: []}
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        X_w = np.column_stack([rng.uniform(-0.9, 0.9, 15), rng.uniform(-0.6, 0.6, 15), rng.uniform(25.0, 28.0, 15)])
+        noise = rng.normal(0.0, 0.7, (15, 2))
+        u = CAMERA.fx * X_w[:, 0] / X_w[:, 2] + CAMERA.cx + noise[:, 0]
+        meas = np.column_stack([u, CAMERA.fy * X_w[:, 1] / X_w[:, 2] + CAMERA.cy + noise[:, 1],
+                                u - CAMERA.bf / X_w[:, 2]])
+        meas[:2, 2] -= 1.5
+        T_init = se3_exp(np.array([0.0, 0.0, 0.5, 0.0, 0.0, 0.0]))  # the true T_c_w is the identity
+        for k in err:
+            T, inliers = optimize_pose(T_init, X_w, meas, np.ones(15), CAMERA, OptimConfig(), k)
+            err[k].append(abs(T[2, 3]))
+            assert inliers[2:].all()
+            assert inliers[:2].all() if k is None else not inliers[:2].any()
+    assert np.mean(err[3.0]) < 0.06 and np.mean(err[None]) > 0.15, err
 
 
 def test_projection_pairs_equal_generic_stereo_factor():

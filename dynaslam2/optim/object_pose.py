@@ -45,18 +45,20 @@ def optimize_object_pose(
     inv_sigma2: np.ndarray,
     camera: StereoCamera,
     cfg: OptimConfig,
+    disparity_weight: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Refine an object pose from its points `X_o` (object frame) seen by a fixed camera `T_c_w`
     (paper III-B); returns (T_w_o (4,4), inliers (N,) bool).
 
     With the camera fixed, the camera pose in the object frame `T_c_o = T_c_w T_w_o` is the only
     unknown: this is exactly camera pose-only optimization on constant points (`optimize_pose`,
-    same Huber / chi2 rounds and thresholds), mapped back by `T_w_o = T_c_w^-1 T_c_o`.
+    same Huber / chi2 rounds and thresholds, `disparity_weight` as there), mapped back by
+    `T_w_o = T_c_w^-1 T_c_o`.
     """
     T_c_w = np.asarray(T_c_w, dtype=float)
     T_w_o_init = np.asarray(T_w_o_init, dtype=float)
     if T_c_w.shape != (4, 4) or T_w_o_init.shape != (4, 4):
         raise InputError(f"optimize_object_pose: T_c_w and T_w_o_init must be (4, 4), got {T_c_w.shape}, "
                          f"{T_w_o_init.shape}")
-    T_c_o, inliers = optimize_pose(T_c_w @ T_w_o_init, X_o, meas, inv_sigma2, camera, cfg)
+    T_c_o, inliers = optimize_pose(T_c_w @ T_w_o_init, X_o, meas, inv_sigma2, camera, cfg, disparity_weight)
     return inverse(T_c_w) @ T_c_o, inliers

@@ -17,7 +17,7 @@ from dynaslam2.errors import InputError
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
 from dynaslam2.optim.gtsam_utils import lm_params, matrix_from_pose3, pose3_from_matrix
-from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, is_stereo, residuals
+from dynaslam2.optim.reprojection import chi2, chi2_thresholds, disparity_residuals, huber_cost, is_stereo, residuals
 
 
 def optimize_pose(
@@ -27,6 +27,7 @@ def optimize_pose(
     inv_sigma2: np.ndarray,
     camera: StereoCamera,
     cfg: OptimConfig,
+    disparity_weight: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Refine `T_c_w` from 3D-2D correspondences; returns (T_c_w (4,4), inliers (N,) bool).
 
@@ -35,10 +36,13 @@ def optimize_pose(
     result on the benchmark, twice the time), then re-tests every correspondence: chi2 > 7.815
     (stereo) / 5.991 (mono) or a point behind the camera is an outlier. Huber (delta = sqrt of the
     threshold) in the first `cfg.pose_robust_rounds` rounds. Fewer than `cfg.pose_min_points`
-    correspondences: init, all False.
+    correspondences: init, all False. `disparity_weight` (N,): stereo residuals are `[u, v, disparity]`,
+    the disparity at sigma / disparity_weight (`pose_only_factor`), in the solve and in the test.
     """
     T_c_w_init, X_w, meas, inv_sigma2 = _check_inputs(T_c_w_init, X_w, meas, inv_sigma2)
     n = len(X_w)
+    if disparity_weight is not None:
+        disparity_weight = np.broadcast_to(np.asarray(disparity_weight, dtype=np.float64), (n,))
     if n < cfg.pose_min_points:
         return T_c_w_init.copy(), np.zeros(n, dtype=bool)
     th = chi2_thresholds(meas, cfg.chi2_mono, cfg.chi2_stereo)
@@ -50,9 +54,12 @@ def optimize_pose(
         robust = rnd < cfg.pose_robust_rounds
         start = T_c_w_init if cfg.pose_restart_rounds else T_c_w
         T_c_w = _solve(start, X_w[inliers], meas[inliers], inv_sigma2[inliers], th[inliers] if robust else None, camera,
-                       cfg)
+                       cfg, None if disparity_weight is None else disparity_weight[inliers])
         X_c = X_w @ T_c_w[:3, :3].T + T_c_w[:3, 3]
-        inliers = (chi2(residuals(camera, X_c, meas), inv_sigma2) <= th) & (X_c[:, 2] > cfg.min_depth)
+        e = residuals(camera, X_c, meas)
+        if disparity_weight is not None:
+            e = disparity_residuals(e, meas, disparity_weight)
+        inliers = (chi2(e, inv_sigma2) <= th) & (X_c[:, 2] > cfg.min_depth)
         if inliers.sum() < cfg.pose_min_inliers:
             break
     return T_c_w, inliers
@@ -66,10 +73,11 @@ def _solve(
     huber_delta2: np.ndarray | None,
     camera: StereoCamera,
     cfg: OptimConfig,
+    disparity_weight: np.ndarray | None,
 ) -> np.ndarray:
     """LM from `T_c_w` on the single pose variable (gtsam key 0 holds T_w_c)."""
     graph = gtsam.NonlinearFactorGraph()
-    graph.push_back(pose_only_factor(0, X_w, meas, inv_sigma2, huber_delta2, camera, cfg.min_depth))
+    graph.push_back(pose_only_factor(0, X_w, meas, inv_sigma2, huber_delta2, camera, cfg.min_depth, disparity_weight))
     values = gtsam.Values()
     values.insert(0, pose3_from_matrix(inverse(T_c_w)))
     params = lm_params(cfg, cfg.pose_iterations, cfg.pose_relative_error_tol)
@@ -85,6 +93,7 @@ def pose_only_factor(
     huber_delta2: np.ndarray | None,
     camera: StereoCamera,
     min_depth: float,
+    disparity_weight: np.ndarray | float | None = None,
 ) -> gtsam.CustomFactor:
     """One factor on the camera pose Pose3 `T_x_c` at `key` (x: the frame of the constant points `X`,
     the world or an object) holding all reprojection residuals whitened by sqrt(inv_sigma2) (eq. (1)).
@@ -95,6 +104,11 @@ def pose_only_factor(
     the linearization is reweighted as gtsam's Robust noise model does (sqrt of the Huber weight) and
     the error evaluation returns residuals whose half squared norm is the Huber cost. Points closer
     than `min_depth` contribute nothing.
+
+    `disparity_weight` (per observation or one): the third residual of a stereo observation is the
+    disparity, predicted bf / z minus measured u - u_right, at sigma / disparity_weight, instead of u_right at sigma (ORB-SLAM2's
+    isotropic `[u, v, u_right]`, which gives the disparity a sigma of sqrt(2) x the keypoint's: ~1 px,
+    where the sub-pixel SAD measures it to ~0.1 px).
     """
     n = len(meas)
     stereo = is_stereo(meas)
@@ -111,7 +125,10 @@ def pose_only_factor(
         r = np.empty((n, 3))
         r[:, 0] = u - meas[:, 0]
         r[:, 1] = fy * y * inv_z + cy - meas[:, 1]
-        r[:, 2] = np.where(stereo, u - bf * inv_z - meas[:, 2], 0.0)
+        if disparity_weight is None:
+            r[:, 2] = np.where(stereo, u - bf * inv_z - meas[:, 2], 0.0)
+        else:
+            r[:, 2] = np.where(stereo, disparity_weight * (bf * inv_z - meas[:, 0] + meas[:, 2]), 0.0)
         r *= w[:, None]
         if huber_delta2 is not None:
             c2 = np.maximum(np.einsum("ij,ij->i", r, r), 1e-300)
@@ -122,19 +139,23 @@ def pose_only_factor(
             r *= scale[:, None]
             w = w * scale
         if H is not None:
-            # rows of d pi / d X_c: (a, 0, c), (0, b, d), (a, 0, e); the 3x6 block is [row x X_c, -row]
+            # rows of d pi / d X_c: (a, 0, c), (0, b, d), (a3, 0, e); the 3x6 block is [row x X_c, -row]
+            # (disparity: a3 = 0, e = -k bf / z^2)
             a = w * fx * inv_z
             b = w * fy * inv_z
             c = -a * x * inv_z
             d = -b * y * inv_z
-            e = -w * (fx * x - bf) * inv_z**2
+            if disparity_weight is None:
+                a3, e = a, -w * (fx * x - bf) * inv_z**2
+            else:
+                a3, e = np.zeros(n), -w * disparity_weight * bf * inv_z**2
             J = np.zeros((n, 3, 6))
             J[:, 0, 0], J[:, 0, 1], J[:, 0, 2] = -c * y, c * x - a * z, a * y
             J[:, 0, 3], J[:, 0, 5] = -a, -c
             J[:, 1, 0], J[:, 1, 1], J[:, 1, 2] = b * z - d * y, d * x, -b * x
             J[:, 1, 4], J[:, 1, 5] = -b, -d
-            J[:, 2, 0], J[:, 2, 1], J[:, 2, 2] = -e * y, e * x - a * z, a * y
-            J[:, 2, 3], J[:, 2, 5] = -a, -e
+            J[:, 2, 0], J[:, 2, 1], J[:, 2, 2] = -e * y, e * x - a3 * z, a3 * y
+            J[:, 2, 3], J[:, 2, 5] = -a3, -e
             H[0] = J.reshape(-1, 6)[rows]
         return r.ravel()[rows]
 

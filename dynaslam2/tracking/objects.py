@@ -154,6 +154,23 @@ class ObjectTracker:
         zs = np.where(z > 0, z, 1.0)
         return np.where(z > 0, (self.camera.bf / zs**2) ** 2 * self.inv_level_sigma2[frame.keypoints.octave[kp]], 0.0)
 
+    def _disparity_weight(self, frame: Frame, objects: ObjectMap, kp: np.ndarray, pts: np.ndarray) -> np.ndarray | None:
+        """(K,) weights of the disparity residuals of the object pose-only optimization (the keypoint's
+        sigma over the disparity's): the measured disparity at sigma / pose_disparity_weight, plus the
+        depth uncertainty of the object point at the keypoint's depth (its fused depth information,
+        which `_depth_weight` counts at a 1 px disparity sigma, scaled to the same sigma). A point first
+        placed far away thus weighs little in depth up close instead of being rejected, until fused.
+        None when pose_disparity_weight is 0."""
+        k = self.cfg.pose_disparity_weight
+        if not k:
+            return None
+        sigma = 1.0 / np.sqrt(self.inv_level_sigma2[frame.keypoints.octave[kp]])
+        z = frame.depth[kp]
+        with np.errstate(divide="ignore"):
+            sigma_z = 1.0 / (k * np.sqrt(objects.points.weight[pts]))
+        sigma_d = np.hypot(sigma / k, self.camera.bf / np.where(z > 0, z, 1.0) ** 2 * sigma_z)
+        return sigma / sigma_d
+
     def _fuse_points(self, frame: Frame, objects: ObjectMap, T_w_o: np.ndarray, kp: np.ndarray, pts: np.ndarray) -> None:
         """Average the stereo observations of inlier keypoints `kp` (measured object pose `T_w_o`)
         into their object points `pts`, weighted by depth information, so points first seen far away
@@ -199,7 +216,7 @@ class ObjectTracker:
         meas = frame.measurements(kp)
         inv_sigma2 = self.inv_level_sigma2[frame.keypoints.octave[kp]]
         T_w_o, inliers = optimize_object_pose(frame.T_c_w, T_init, X_o, meas, inv_sigma2, self.camera,
-                                              self.config.optim)
+                                              self.config.optim, self._disparity_weight(frame, objects, kp, pts))
         inliers = np.asarray(inliers, dtype=bool)
         if not np.all(np.isfinite(T_w_o)) or np.count_nonzero(inliers) < cfg.min_inliers:
             return None
