@@ -105,7 +105,7 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
     stereo = is_stereo(problem.meas)
 
     # keys for the keyframes and determined points of the whole window, kept through both stages
-    use = _determined(problem, np.ones(len(problem.obs_kf), dtype=bool), stereo)
+    use = determined_observations(problem, np.ones(len(problem.obs_kf), dtype=bool), stereo)
     kf_idx = np.flatnonzero(np.bincount(problem.obs_kf[use], minlength=len(T_c_w)) > 0)
     pt_idx = np.flatnonzero(np.bincount(problem.obs_pt[use], minlength=len(X_w)) > 0)
     if problem.kf_ids is None:
@@ -129,7 +129,7 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
             break  # no refine stage: the final classification below is ORB-SLAM2's outlier removal
         if not robust:
             c2, depth = _chi2_depth(problem, T_c_w, X_w, camera)
-            use = _determined(problem, (c2 <= th) & (depth > cfg.min_depth), stereo)
+            use = determined_observations(problem, (c2 <= th) & (depth > cfg.min_depth), stereo)
             # points no longer determined and free keyframes left without observations keep their estimate
             dropped_pt = np.setdiff1d(pt_idx, problem.obs_pt[use])
             still_used = np.concatenate([problem.obs_kf[use], kf_idx[np.isin(kf_key[kf_idx], fixed_keys)]])
@@ -177,7 +177,7 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
     )
 
 
-def _determined(problem: BAProblem, use: np.ndarray, stereo: np.ndarray) -> np.ndarray:
+def determined_observations(problem: BAProblem, use: np.ndarray, stereo: np.ndarray) -> np.ndarray:
     """`use` restricted to observations of points that the used observations determine: one stereo
     observation or at least two observations."""
     P = len(problem.X_w)

@@ -64,8 +64,8 @@ exact joint form spends ~60% of each LM iteration in gtsam's elimination of the 
 Synthetic window (`bench_object_ba.py`: 10 keyframes, 1500 static points, 4 objects x 80 points, no
 static BA first: exact form): ~0.6 s for the joint BA against ~0.25 s for the static local BA, ~0.4 s
 for object-weak only; the "direct" eq. (2) form ~5x slower, eq. (4) with the points as variables ~5x
-slower. Object-weak only: half of each iteration is
-the Python factors (one pose-only factor per camera, ~0.8 ms per linearization).
+slower. Object-weak only: half of each iteration is the Python factors (one pose-only factor per
+camera, ~0.8 ms per linearization).
 """
 
 from __future__ import annotations
@@ -90,7 +90,12 @@ from dynaslam2.optim.gtsam_utils import (
     insert_poses,
     lm_params,
 )
-from dynaslam2.optim.local_ba import FIXED_POSE_SIGMA, BAProblem, _determined, local_bundle_adjustment
+from dynaslam2.optim.local_ba import (
+    FIXED_POSE_SIGMA,
+    BAProblem,
+    determined_observations,
+    local_bundle_adjustment,
+)
 from dynaslam2.optim.object_factors import (
     direct_projection_factor,
     motion_factor,
@@ -422,7 +427,7 @@ def _static_reduction(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarra
     Huber kernel (`cfg.objects.static_reduced`); also the (M,) static observations it uses: in front of
     the camera, of determined points."""
     _, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
-    use = _determined(problem, depth > cfg.min_depth, is_stereo(problem.meas))
+    use = determined_observations(problem, depth > cfg.min_depth, is_stereo(problem.meas))
     free = ~fixed & (np.bincount(problem.obs_kf[use], minlength=len(fixed)) > 0)
     schur = static_schur(est.T_c_w, free, est.X_w, problem.obs_kf[use], problem.obs_pt[use], problem.meas[use],
                          problem.inv_sigma2[use], camera, cfg.min_depth, th[use], cfg.objects.static_point_damping)

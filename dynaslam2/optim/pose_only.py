@@ -106,9 +106,9 @@ def pose_only_factor(
     than `min_depth` contribute nothing.
 
     `disparity_weight` (per observation or one): the third residual of a stereo observation is the
-    disparity, predicted bf / z minus measured u - u_right, at sigma / disparity_weight, instead of u_right at sigma (ORB-SLAM2's
-    isotropic `[u, v, u_right]`, which gives the disparity a sigma of sqrt(2) x the keypoint's: ~1 px,
-    where the sub-pixel SAD measures it to ~0.1 px).
+    disparity, predicted bf / z minus measured u - u_right, at sigma / disparity_weight, instead of
+    u_right at sigma (ORB-SLAM2's isotropic `[u, v, u_right]`, which gives the disparity a sigma of
+    sqrt(2) x the keypoint's: ~1.4 px, where the sub-pixel SAD measures it to ~0.1 px).
     """
     n = len(meas)
     stereo = is_stereo(meas)

@@ -27,9 +27,10 @@ def residuals(camera: StereoCamera, X_c: np.ndarray, meas: np.ndarray) -> np.nda
     return e
 
 
-def disparity_residuals(e: np.ndarray, meas: np.ndarray, disparity_weight: float) -> np.ndarray:
-    """(M, 3) residuals `[u, v, disparity x disparity_weight]` from the `[u, v, u_right]` ones `e`: the
-    disparity residual is e_u - e_u_right (predicted minus measured u - u_right); mono rows keep 0."""
+def disparity_residuals(e: np.ndarray, meas: np.ndarray, disparity_weight: np.ndarray | float) -> np.ndarray:
+    """(M, 3) residuals `[u, v, disparity x disparity_weight]` (weight per row or one) from the
+    `[u, v, u_right]` ones `e`: the disparity residual is e_u - e_u_right (predicted minus measured
+    u - u_right); mono rows keep 0."""
     out = e.copy()
     out[:, 2] = np.where(is_stereo(meas), disparity_weight * (e[:, 0] - e[:, 2]), 0.0)
     return out
