@@ -131,3 +131,36 @@ def test_row_search_gives_dynamic_keypoints_depth(run):
     errors = np.abs(np.concatenate(disparity_errors))
     assert n_after >= 1.1 * n_before, (n_before, n_after)
     assert np.mean(errors < 1.0) > 0.85, np.mean(errors < 1.0)
+
+
+def test_densify_adds_keypoints_only_on_sparse_dynamic_instances(run):
+    """objects.densify_features: the first pass's keypoints come first, unchanged; the added ones lie on
+    dynamic-class instances that the first pass gave fewer than densify_below keypoints, on levels <=
+    densify_max_level, never on a first-pass keypoint's pixel; those instances gain keypoints with depth."""
+    from dynaslam2.classes import instance_class_id
+    from dynaslam2.config import load_config
+    from dynaslam2.tracking.frontend import DYNAMIC_CLASS_IDS, FrameBuilder
+
+    seq = open_sequence(run[0])
+    overrides = ["mode=dynamic", "orb.threads=1", "objects.densify_below=30", "objects.densify_max_level=2"]
+    plain = FrameBuilder(load_config(None, overrides + ["objects.densify_features=0"]), seq.camera)
+    dense = FrameBuilder(load_config(None, overrides + ["objects.densify_features=500"]), seq.camera)
+    added = gained = 0
+    for i in range(0, FRAMES, 5):
+        data = seq[i]
+        a, b = plain.build(data, {}), dense.build(data, {})
+        n = len(a.keypoints)
+        np.testing.assert_array_equal(a.keypoints.uv, b.keypoints.uv[:n])
+        np.testing.assert_array_equal(a.depth[a.static], b.depth[:n][b.static[:n]])
+        extra = np.arange(n, len(b.keypoints))
+        inst = b.instance_id[extra]
+        assert np.all(np.isin(instance_class_id(inst), DYNAMIC_CLASS_IDS)) and np.all(inst > 0)
+        assert np.all(b.keypoints.octave[extra] <= 2)
+        first_px = {tuple(p) for p in np.rint(a.keypoints.uv).astype(int).tolist()}
+        assert not any(tuple(p) in first_px for p in np.rint(b.keypoints.uv[extra]).astype(int).tolist())
+        sparse = [k for k in np.unique(inst) if np.count_nonzero(a.instance_id == k) < 30]
+        assert set(np.unique(inst).tolist()) <= set(sparse)
+        added += len(extra)
+        gained += sum(np.count_nonzero((b.instance_id == k) & (b.depth > 0))
+                      - np.count_nonzero((a.instance_id == k) & (a.depth > 0)) for k in sparse)
+    assert added > 0 and gained > 0, (added, gained)

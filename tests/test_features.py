@@ -228,6 +228,16 @@ def test_extract_pair_threads_and_budget_override(kitti_left, worker):
         ORBExtractor(ORBConfig()).extract(pyr, n_features=0)
 
 
+def test_extraction_max_level_drops_the_upper_budgets(kitti_left, extractor):
+    """`max_level` keeps the budgets (and keypoints) of levels 0..max_level only, the same keypoints there."""
+    _, pyr, full = kitti_left
+    low = extractor.extract(pyr, max_level=2)
+    assert low.octave.max() == 2
+    keep = full.octave <= 2
+    np.testing.assert_array_equal(full.uv[keep], low.uv)
+    np.testing.assert_array_equal(full.desc[keep], low.desc)
+
+
 def test_extraction_mask_drops_and_reallocates(kitti_left, extractor):
     img, pyr, kp = kitti_left
     mask = np.ones(img.shape, bool)
@@ -579,3 +589,53 @@ def test_search_by_projection_recovers_shift(kitti_left, extractor):
     with np.errstate(all="raise"):
         idx_bad = search_by_projection(kp2, uv_bad, kp.desc, radius, octave_range, None, None, 100, 0.9, False)
     assert np.all(idx_bad[:5] == -1)
+
+
+def _narrow_objects_pair(d_bg: float = 6.0, d_obj: float = 15.0, width: int = 7, shape=(240, 320), seed: int = 0):
+    """Narrow vertical objects (7 px wide, labels 2001, 2002, ...; a pedestrian at 15 m at 640x480) of one
+    texture at disparity `d_obj` before a background of another texture at `d_bg`: (left, right, labels)."""
+    rng = np.random.default_rng(seed)
+    h, w = shape[0], shape[1] + 64
+
+    def texture(sigma: float) -> np.ndarray:
+        return cv2.normalize(cv2.GaussianBlur(rng.normal(0, 1, (h, w)).astype(np.float32), (0, 0), sigma), None, 0, 255,
+                             cv2.NORM_MINMAX)
+
+    background, objects = texture(1.5), texture(1.0)
+    map_y = np.tile(np.arange(h, dtype=np.float32)[:, None], (1, w))
+
+    def shifted(img: np.ndarray, d: float, interpolation: int) -> np.ndarray:  # right(x) = left(x + d)
+        return cv2.remap(img, np.tile(np.arange(w, dtype=np.float32) + d, (h, 1)), map_y, interpolation,
+                         borderMode=cv2.BORDER_REFLECT)
+
+    labels = np.zeros((h, w), np.int32)
+    for k, x0 in enumerate(range(100, w - 24, 24)):
+        labels[30 : h - 30, x0 : x0 + width] = 2001 + k
+    left = np.where(labels > 0, objects, background)
+    on_object = shifted(labels.astype(np.float32), d_obj, cv2.INTER_NEAREST) > 0
+    right = np.where(on_object, shifted(objects, d_obj, cv2.INTER_CUBIC), shifted(background, d_bg, cv2.INTER_CUBIC))
+    u8 = lambda a: np.clip(np.rint(a[:, 32:-32]), 0, 255).astype(np.uint8)  # noqa: E731
+    return u8(left), u8(right), labels[:, 32:-32]
+
+
+def test_stereo_row_search_on_narrow_objects_scores_their_own_pixels():
+    """Keypoints on objects narrower than the SAD window, before a background at another disparity: scored
+    on their instance's pixels only (`labels`), the row search finds the object's disparity for most of
+    them; on the whole window the background's texture makes most of them fail the uniqueness test."""
+    left, right, labels = _narrow_objects_pair()
+    camera = StereoCamera(300.0, 300.0, 160.0, 120.0, 0.1, 320, 240)
+    ex = ORBExtractor(ORBConfig(n_features=2000))
+    pyr_l, pyr_r = ex.build_pyramid(left), ex.build_pyramid(right)
+    kp = ex.extract(pyr_l)
+    px = np.rint(kp.uv).astype(np.int64)
+    idx = np.flatnonzero((labels[px[:, 1], px[:, 0]] > 0) & (kp.octave <= 1))
+    assert len(idx) > 100
+    correct = {}
+    for name, lab in (("window", None), ("instance", labels)):
+        u_right, depth = search_stereo_rows(kp, idx, pyr_l, pyr_r, camera, StereoConfig(), 0.75, 10.0, lab)
+        has = depth > 0
+        err = np.abs(kp.uv[idx[has], 0] - u_right[has] - 15.0)
+        assert np.mean(err < 0.5) > 0.95, (name, np.mean(err < 0.5))
+        correct[name] = int(np.sum(err < 0.5))
+    assert correct["instance"] > 0.5 * len(idx), correct
+    assert correct["instance"] > 3 * correct["window"], correct

@@ -206,11 +206,13 @@ class ORBExtractor:
         return pyramid
 
     def extract(
-        self, pyramid: list[np.ndarray], mask: np.ndarray | None = None, n_features: int | None = None, timing_ms: dict[str, float] | None = None
+        self, pyramid: list[np.ndarray], mask: np.ndarray | None = None, n_features: int | None = None,
+        timing_ms: dict[str, float] | None = None, max_level: int | None = None
     ) -> Keypoints:
         """Distributed ORB keypoints of all levels. `mask` (HxW bool/uint8 at level 0, True/non-zero = usable)
         removes candidates before the distribution, so the budget goes to the usable area. `n_features`
-        overrides the configured budget (e.g. more features on the right image of a stereo pair).
+        overrides the configured budget (e.g. more features on the right image of a stereo pair);
+        `max_level` keeps only the budgets of levels 0..max_level (the others' are dropped, not moved).
         `timing_ms`, when given, receives the wall ms of the stages: fast, spread, orientation, descriptors."""
         if len(pyramid) != self.n_levels:
             raise InputError(f"pyramid: expected {self.n_levels} levels, got {len(pyramid)}")
@@ -224,6 +226,8 @@ class ORBExtractor:
             if n_features <= 0:
                 raise InputError(f"n_features: expected a positive integer, got {n_features}")
             budgets = level_budgets(int(n_features), self.n_levels, self.cfg.scale_factor)
+        if max_level is not None:
+            budgets = np.where(np.arange(self.n_levels) <= max_level, budgets, 0)
         scales = level_scales(pyramid)
         parts = []
         stages = dict.fromkeys(("fast", "spread", "orientation", "descriptors"), 0.0)

@@ -11,7 +11,7 @@ import numpy as np
 from dynaslam2.classes import CLASS_IDS, DYNAMIC_CLASSES, instance_class_id
 from dynaslam2.config import SlamConfig
 from dynaslam2.errors import InputError
-from dynaslam2.features.orb import ORBExtractor, to_gray
+from dynaslam2.features.orb import Keypoints, ORBExtractor, to_gray
 from dynaslam2.features.stereo import depth_from_image, match_stereo, search_stereo_rows
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.io.types import FrameData
@@ -53,15 +53,44 @@ class FrameBuilder:
         if data.right is None and data.depth is None:
             raise InputError(f"frame {data.index}: needs a right image or a depth image")
 
-    def _row_search(self, kp, on_dyn: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray) -> None:
+    def _row_search(self, kp, on_dyn: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray,
+                    instances: np.ndarray | None) -> None:
         """Depth by row search (stereo.dynamic_row_search) for the keypoints on dynamic instances
         (`on_dyn`) that `match_stereo` left without; fills `u_right` and `depth` in place."""
         idx = np.flatnonzero(on_dyn & (depth <= 0))
         ur, z = search_stereo_rows(kp, idx, pyr_l, pyr_r, self.camera, self.config.stereo,
-                                   self.config.stereo.row_search_min_depth_m, self.config.objects.max_point_depth_m)
+                                   self.config.stereo.row_search_min_depth_m, self.config.objects.max_point_depth_m,
+                                   instances if self.config.stereo.row_search_instance_mask else None)
         found = z > 0
         u_right[idx[found]] = ur[found]
         depth[idx[found]] = z[found]
+
+    def _pixels(self, kp: Keypoints) -> tuple[np.ndarray, np.ndarray]:
+        """(column, row) of the level-0 pixel nearest to each keypoint."""
+        col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
+        row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
+        return col, row
+
+    def _densify(self, kp: Keypoints, pyr_l: list[np.ndarray], instances: np.ndarray) -> Keypoints:
+        """`kp` followed by the keypoints of a second ORB pass (objects.densify_*) restricted to the
+        dynamic-class instances that the first pass gave fewer than densify_below keypoints (small or
+        weakly textured objects: the grid distribution over the whole image leaves them a handful), on
+        levels 0..densify_max_level, away from the first pass's keypoints (their pixel and its 8
+        neighbours)."""
+        col, row = self._pixels(kp)
+        inst = instances.astype(np.int64)
+        dyn_inst = np.isin(instance_class_id(inst), DYNAMIC_CLASS_IDS) & (inst > 0)
+        ids, counts = np.unique(inst[row, col][dyn_inst[row, col]], return_counts=True)
+        allowed = dyn_inst & ~np.isin(inst, ids[counts >= self.config.objects.densify_below])
+        if not allowed.any():
+            return kp
+        h, w = allowed.shape
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                allowed[np.clip(row + dr, 0, h - 1), np.clip(col + dc, 0, w - 1)] = False
+        extra = self.extractor.extract(pyr_l, mask=allowed, n_features=self.config.objects.densify_features,
+                                       max_level=self.config.objects.densify_max_level)
+        return Keypoints.concatenate([kp, extra]) if len(extra) else kp
 
     def build(self, data: FrameData, timing_ms: dict[str, float]) -> Frame:
         """Extract and match features of `data`; adds `features` and `stereo` to `timing_ms`."""
@@ -80,18 +109,24 @@ class FrameBuilder:
         else:  # left and right concurrently with orb.threads > 1 (ORB-SLAM2 extracts them in two threads)
             pyr_r = self.extractor.build_pyramid(to_gray(data.right))
             kp, kp_r = self.extractor.extract_pair(pyr_l, pyr_r, mask, self.n_features_right)
+        n_first = len(kp)
+        if mode == "dynamic" and data.instances is not None and self.config.objects.densify_features > 0:
+            kp = self._densify(kp, pyr_l, data.instances)
         t1 = time.perf_counter()
         n = len(kp)
-        col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
-        row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
+        col, row = self._pixels(kp)
         on_dyn = dyn[row, col] if dyn is not None else np.zeros(n, dtype=bool)
         if use_depth:
             u_right, depth = depth_from_image(kp, data.depth, self.camera)
         else:
-            u_right, depth = match_stereo(kp, kp_r, pyr_l, pyr_r, self.camera, self.extractor.scale_factors,
-                                          self.config.stereo)
+            # The added keypoints (objects.densify_*) get depth from the row search only: the first pass's
+            # matches (and their SAD statistics) stay as without them.
+            u_right, depth = np.full(n, -1.0), np.full(n, -1.0)
+            u_right[:n_first], depth[:n_first] = match_stereo(kp.subset(slice(0, n_first)), kp_r, pyr_l, pyr_r,
+                                                              self.camera, self.extractor.scale_factors,
+                                                              self.config.stereo)
             if mode == "dynamic" and self.config.stereo.dynamic_row_search:
-                self._row_search(kp, on_dyn, pyr_l, pyr_r, u_right, depth)
+                self._row_search(kp, on_dyn, pyr_l, pyr_r, u_right, depth, data.instances)
         t2 = time.perf_counter()
         if data.instances is not None:
             instance_id = data.instances[row, col].astype(np.int64)
