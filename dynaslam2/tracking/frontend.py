@@ -78,10 +78,9 @@ class FrameBuilder:
         levels 0..densify_max_level, away from the first pass's keypoints (their pixel and its 8
         neighbours)."""
         col, row = self._pixels(kp)
-        inst = instances.astype(np.int64)
-        dyn_inst = np.isin(instance_class_id(inst), DYNAMIC_CLASS_IDS) & (inst > 0)
-        ids, counts = np.unique(inst[row, col][dyn_inst[row, col]], return_counts=True)
-        allowed = dyn_inst & ~np.isin(inst, ids[counts >= self.config.objects.densify_below])
+        dyn_inst = dynamic_mask(instances, 0)
+        ids, counts = np.unique(instances[row, col][dyn_inst[row, col]], return_counts=True)
+        allowed = dyn_inst & ~np.isin(instances, ids[counts >= self.config.objects.densify_below])
         if not allowed.any():
             return kp
         h, w = allowed.shape
