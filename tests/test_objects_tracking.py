@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from dynaslam2.config import load_config
+from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.orb import Keypoints
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp
@@ -409,3 +410,28 @@ def test_point_fusion_keeps_the_object_frame_on_the_body(shape_only):
         assert shift[0, 2] > 0.9 * share * 0.3
     else:
         np.testing.assert_allclose(others, np.tile([0.0, 0.0, -share * 0.4], (len(others), 1)), atol=1e-9)
+
+
+def test_predicted_box_follows_an_approaching_object_out_of_the_image():
+    """The motion-compensated box of a car that comes at the camera (14 m to 4 m in 0.4 s) grows with
+    it and is clipped at the image border as its instance box is; the car keeps its id through the
+    box association alone (new appearance) while it leaves the image."""
+    rng = np.random.default_rng(12)
+    car = Body(rng, 1001, 120, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([1.5, 0.5, 14.0 - 2.5 * i])) for i in range(5)]
+    objects, trk = ObjectMap(), tracker("objects.filter=false")
+    for i in range(4):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    tr = objects.tracks[e.track_id]
+    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    frame = make_frame(4, [(car, T_car[4])])
+    uv = frame.keypoints.uv
+    truth = np.r_[uv.min(axis=0), uv.max(axis=0)]
+    X_c = car.X_b + T_car[4][:3, 3]
+    assert np.any(CAMERA.project(X_c)[:, 0] > CAMERA.width)  # the car is cut by the image border
+    box = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects.points.X_o[tr.last.pt_ids])
+    assert np.all(box >= 0) and box[2] <= CAMERA.width - 1 and box[3] <= CAMERA.height - 1
+    last = np.asarray(tr.last.box2d)
+    assert box_iou(box[None], truth[None])[0, 0] > 0.9 > 0.7 > box_iou(last[None], truth[None])[0, 0]
+    (e4,) = trk.track(frame, None, objects).estimates
+    assert e4.track_id == e.track_id

@@ -65,8 +65,8 @@ class ObjectObservation:
     eq. 5) and which keypoints observed which object points.
 
     kp_idx / pt_ids: inlier keypoints of the frame and their object points; kf_id: the keyframe made
-    from that frame (-1 if none), which makes the observation a member of BA windows; origin_uv: where
-    the object-frame origin projected (motion-compensated box association).
+    from that frame (-1 if none), which makes the observation a member of BA windows; T_c_w: the pose of
+    the camera that made it (motion-compensated box association).
     """
 
     frame_index: int
@@ -79,7 +79,7 @@ class ObjectObservation:
     pt_ids: np.ndarray
     box2d: tuple[float, float, float, float] | None = None
     kf_id: int = -1
-    origin_uv: np.ndarray | None = None  # (2,) image position of the object-frame origin, or None behind
+    T_c_w: np.ndarray | None = None  # (4, 4) world-to-camera pose of the frame
     measured: bool = True  # False: T_w_o is the constant-velocity prediction (instance association only)
 
     @property

@@ -27,7 +27,7 @@ from dynaslam2.config import SlamConfig
 from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import inverse, make_pose
+from dynaslam2.geometry.se3 import inverse, make_pose, transform
 from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
@@ -122,22 +122,28 @@ class ObjectTracker:
             return last.T_w_o.copy()
         return predict_object_pose(last.T_w_o, last.v_o, last.w_o, timestamp - last.timestamp)
 
-    def _origin_uv(self, frame: Frame, T_w_o: np.ndarray) -> np.ndarray | None:
-        """Pixel of the object-frame origin in `frame`, None when behind the camera."""
-        p_c = frame.T_c_w[:3, :3] @ T_w_o[:3, 3] + frame.T_c_w[:3, 3]
-        return self.camera.project(p_c[None])[0] if p_c[2] > 1e-3 else None
-
-    def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray) -> np.ndarray | None:
-        """The object's last 2D box moved by the image motion of its origin to the predicted pose
-        (instance-to-instance association with motion compensation); the last box when unknown."""
+    def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray) -> np.ndarray | None:
+        """The object's last 2D box carried into `frame` (instance-to-instance association with motion
+        compensation), clipped to the image: its points `X_o` (object frame; those of the last
+        observation) moved from the last pose and camera to the predicted pose and this camera, the
+        box follows the mean of their projections and scales by the median ratio of their depths (an
+        approaching object's box grows; a turn that changes its outline does not count). With fewer
+        than 3 points in front of both cameras its origin instead, else the last box as it was."""
         last = track.last
         if last.box2d is None:
             return None
-        uv = self._origin_uv(frame, T_w_o_pred)
-        if uv is None or last.origin_uv is None:
-            return np.asarray(last.box2d, dtype=float)
-        d = uv - last.origin_uv
-        return np.asarray(last.box2d, dtype=float) + np.r_[d, d]
+        box = np.asarray(last.box2d, dtype=float)
+        for X in (X_o, np.zeros((1, 3))) if last.T_c_w is not None else ():  # its points, else its origin
+            p0, p1 = transform(last.T_c_w @ last.T_w_o, X), transform(frame.T_c_w @ T_w_o_pred, X)
+            ok = (p0[:, 2] > 1e-3) & (p1[:, 2] > 1e-3)
+            if np.count_nonzero(ok) < min(3, max(len(X), 1)):
+                continue
+            a_mean, b_mean = self.camera.project(p0[ok]).mean(axis=0), self.camera.project(p1[ok]).mean(axis=0)
+            scale = np.median(p0[ok, 2] / p1[ok, 2])  # image size ~ 1 / depth
+            box = np.r_[b_mean, b_mean] + scale * (box - np.r_[a_mean, a_mean])
+            break
+        hi = np.array([self.camera.width - 1, self.camera.height - 1] * 2, dtype=float)
+        return np.clip(box, 0.0, hi)
 
     def _world_points(self, frame: Frame, kp: np.ndarray) -> np.ndarray:
         return frame.unproject(kp, self.camera)
@@ -346,7 +352,7 @@ class ObjectTracker:
         """(b): brute-force matching of the object's points with the keypoints of the instance that
         overlaps its (motion-compensated) last box most (the object was seen in the previous frames)."""
         cfg = self.cfg
-        box = self.predicted_box(track, frame, T_w_o_pred)
+        box = self.predicted_box(track, frame, T_w_o_pred, objects.points.X_o[track.last.pt_ids])
         if frame.timestamp - track.last.timestamp > cfg.max_velocity_gap_s or box is None or len(inst_ids) == 0:
             return None
         iou = box_iou(box[None], boxes)[0]
@@ -386,7 +392,7 @@ class ObjectTracker:
         track.observations.append(ObjectObservation(
             frame_index=frame.index, timestamp=frame.timestamp, T_w_o=T_w_o, v_o=v_o, w_o=w_o,
             instance_id=instance_id, kp_idx=kp.astype(np.int64), pt_ids=pts.astype(np.int64), box2d=box2d,
-            origin_uv=self._origin_uv(frame, T_w_o), measured=measured))
+            T_c_w=frame.T_c_w.copy(), measured=measured))
         track.velocity_known = known
         P = objects.points
         P.desc[pts] = frame.keypoints.desc[kp]
@@ -470,7 +476,7 @@ class ObjectTracker:
         # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
         # goes on at its constant-velocity prediction, registered on the keypoints that match its points;
         # the instance's other close keypoints become its points.
-        tr = self._join_by_box(frame, unseen, pred, box, boxes, cfg.join_max_gap_s if enough else cfg.coast_max_s)
+        tr = self._join_by_box(frame, objects, unseen, pred, box, boxes, cfg.join_max_gap_s if enough else cfg.coast_max_s)
         if tr is not None:
             if not enough:
                 kp, X_w = kp[:0], X_w[:0]
@@ -544,7 +550,7 @@ class ObjectTracker:
         T_w_o[:3, 3] += offset[inl].mean(axis=0)
         return T_w_o, kp[m[inl, 1]], pts[m[inl, 0]]
 
-    def _join_by_box(self, frame: Frame, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
+    def _join_by_box(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                      box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
         """The unseen track measured within `max_gap_s` whose last box, as it was or moved by its
         predicted image motion (wrong when the velocity is, or for a near object whose origin projects
@@ -555,7 +561,8 @@ class ObjectTracker:
                   and frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
         if not recent or not np.all(np.isfinite(box)):
             return None
-        moved = np.array([self.predicted_box(tr, frame, pred[tr.track_id]) for tr in recent])
+        moved = np.array([self.predicted_box(tr, frame, pred[tr.track_id], objects.points.X_o[tr.last.pt_ids])
+                          for tr in recent])
         last = np.array([tr.last.box2d for tr in recent], dtype=float)
         iou = np.maximum(box_iou(np.array([box]), moved)[0], box_iou(np.array([box]), last)[0])
         b = int(np.argmax(iou))
