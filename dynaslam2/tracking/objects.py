@@ -122,28 +122,42 @@ class ObjectTracker:
             return last.T_w_o.copy()
         return predict_object_pose(last.T_w_o, last.v_o, last.w_o, timestamp - last.timestamp)
 
-    def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray) -> np.ndarray | None:
+    def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray,
+                      X_o: np.ndarray) -> np.ndarray | None:
         """The object's last 2D box carried into `frame` (instance-to-instance association with motion
-        compensation), clipped to the image: its points `X_o` (object frame; those of the last
-        observation) moved from the last pose and camera to the predicted pose and this camera, the
-        box follows the mean of their projections and scales by the median ratio of their depths (an
-        approaching object's box grows; a turn that changes its outline does not count). With fewer
-        than 3 points in front of both cameras its origin instead, else the last box as it was."""
+        compensation), clipped to the image: it follows the mean projection of the object points `X_o`
+        (object frame; those of the last observation) from the last pose and camera to the predicted
+        pose and this camera, and scales by the median ratio of their depths (an approaching object's
+        box grows; a turn that changes its outline does not count). With fewer than 3 of the points in
+        front of both cameras the object-frame origin moves it; the last box as it was when neither can."""
         last = track.last
         if last.box2d is None:
             return None
         box = np.asarray(last.box2d, dtype=float)
-        for X in (X_o, np.zeros((1, 3))) if last.T_c_w is not None else ():  # its points, else its origin
-            p0, p1 = transform(last.T_c_w @ last.T_w_o, X), transform(frame.T_c_w @ T_w_o_pred, X)
-            ok = (p0[:, 2] > 1e-3) & (p1[:, 2] > 1e-3)
-            if np.count_nonzero(ok) < min(3, max(len(X), 1)):
-                continue
-            a_mean, b_mean = self.camera.project(p0[ok]).mean(axis=0), self.camera.project(p1[ok]).mean(axis=0)
-            scale = np.median(p0[ok, 2] / p1[ok, 2])  # image size ~ 1 / depth
-            box = np.r_[b_mean, b_mean] + scale * (box - np.r_[a_mean, a_mean])
-            break
-        hi = np.array([self.camera.width - 1, self.camera.height - 1] * 2, dtype=float)
-        return np.clip(box, 0.0, hi)
+        motion = None
+        if last.T_c_w is not None:
+            motion = self._image_motion(track, frame, T_w_o_pred, X_o, 3)
+            if motion is None:
+                motion = self._image_motion(track, frame, T_w_o_pred, np.zeros((1, 3)), 1)
+        if motion is not None:
+            uv_last, uv_pred, scale = motion
+            box = np.r_[uv_pred, uv_pred] + scale * (box - np.r_[uv_last, uv_last])
+        return np.clip(box, 0.0, [self.camera.width - 1, self.camera.height - 1] * 2)
+
+    def _image_motion(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray,
+                      min_points: int) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """(mean pixel in the last observation, mean pixel at the predicted pose in `frame`, median
+        depth ratio last / predicted) of the object-frame points `X_o` in front of both cameras; None
+        with fewer than `min_points` of them."""
+        last = track.last
+        X_c_last = transform(last.T_c_w @ last.T_w_o, X_o)
+        X_c_pred = transform(frame.T_c_w @ T_w_o_pred, X_o)
+        front = (X_c_last[:, 2] > 1e-3) & (X_c_pred[:, 2] > 1e-3)
+        if np.count_nonzero(front) < min_points:
+            return None
+        X_c_last, X_c_pred = X_c_last[front], X_c_pred[front]
+        return (self.camera.project(X_c_last).mean(axis=0), self.camera.project(X_c_pred).mean(axis=0),
+                float(np.median(X_c_last[:, 2] / X_c_pred[:, 2])))  # image size ~ 1 / depth
 
     def _world_points(self, frame: Frame, kp: np.ndarray) -> np.ndarray:
         return frame.unproject(kp, self.camera)
@@ -476,7 +490,8 @@ class ObjectTracker:
         # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
         # goes on at its constant-velocity prediction, registered on the keypoints that match its points;
         # the instance's other close keypoints become its points.
-        tr = self._join_by_box(frame, objects, unseen, pred, box, boxes, cfg.join_max_gap_s if enough else cfg.coast_max_s)
+        tr = self._join_by_box(frame, objects, unseen, pred, box, boxes,
+                               cfg.join_max_gap_s if enough else cfg.coast_max_s)
         if tr is not None:
             if not enough:
                 kp, X_w = kp[:0], X_w[:0]
