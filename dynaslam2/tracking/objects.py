@@ -489,7 +489,10 @@ class ObjectTracker:
                 return tid
         # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
         # goes on at its constant-velocity prediction, registered on the keypoints that match its points;
-        # the instance's other close keypoints become its points.
+        # the instance's other close keypoints become its points. With objects.filter the observation then
+        # keeps the filter's predicted position (the registration places the new points only): taking the
+        # registered position as a filter measurement raised the object ATE on 3 of 4 bench sequences
+        # (static s1 0.26 -> 0.34 m).
         tr = self._join_by_box(frame, objects, unseen, pred, box, boxes,
                                cfg.join_max_gap_s if enough else cfg.coast_max_s)
         if tr is not None:
