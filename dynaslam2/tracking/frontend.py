@@ -83,10 +83,9 @@ class FrameBuilder:
         allowed = dyn_inst & ~np.isin(instances, ids[counts >= self.config.objects.densify_below])
         if not allowed.any():
             return kp
-        h, w = allowed.shape
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                allowed[np.clip(row + dr, 0, h - 1), np.clip(col + dc, 0, w - 1)] = False
+        first = np.zeros(allowed.shape, np.uint8)
+        first[row, col] = 1
+        allowed &= cv2.dilate(first, np.ones((3, 3), np.uint8)) == 0
         extra = self.extractor.extract(pyr_l, mask=allowed, n_features=self.config.objects.densify_features,
                                        max_level=self.config.objects.densify_max_level)
         return Keypoints.concatenate([kp, extra]) if len(extra) else kp
@@ -120,10 +119,11 @@ class FrameBuilder:
         else:
             # The added keypoints (objects.densify_*) get depth from the row search only: the first pass's
             # matches (and their SAD statistics) stay as without them.
-            u_right, depth = np.full(n, -1.0), np.full(n, -1.0)
-            u_right[:n_first], depth[:n_first] = match_stereo(kp.subset(slice(0, n_first)), kp_r, pyr_l, pyr_r,
-                                                              self.camera, self.extractor.scale_factors,
-                                                              self.config.stereo)
+            first = kp if n == n_first else kp.subset(slice(0, n_first))
+            u_right, depth = match_stereo(first, kp_r, pyr_l, pyr_r, self.camera, self.extractor.scale_factors,
+                                          self.config.stereo)
+            none = np.full(n - n_first, -1.0)  # float64 arrays: the row search writes its depths in full precision
+            u_right, depth = np.r_[u_right.astype(np.float64), none], np.r_[depth.astype(np.float64), none]
             if mode == "dynamic" and self.config.stereo.dynamic_row_search:
                 self._row_search(kp, on_dyn, pyr_l, pyr_r, u_right, depth, data.instances)
         t2 = time.perf_counter()
