@@ -11,7 +11,7 @@ parked and driving cars of the KITTI odometry 06 clip in `KITTI_06_CARS`, marked
 images (the clip has no object labels). Sim boxes: the ground-truth 2D boxes of cars, vans and trucks
 entirely inside the image, every 10th frame of the bench_dynamic sequences (generated into --work if
 absent). KITTI is extracted twice: with the default 2000 features on its 1226x370 images, and with
-the sim's budget per pixel (2000 over 640x480), which is the fair comparison. Prints the median
+the sim's budget per pixel (the default over SIM_SIZE), which is the fair comparison. Prints the median
 densities per source and box-area bin.
 """
 
@@ -38,6 +38,7 @@ KITTI_06_CARS = [
     ("000020", 722, 181, 858, 264),
     ("000040", 84, 184, 172, 228),
 ]
+SIM_SIZE = (640, 480)  # the bench_dynamic sequences' image size (width, height)
 AREA_BINS = [(400, 1500), (1500, 4000), (4000, 15000), (15000, np.inf)]  # px^2; smaller boxes are left out
 INNER_MARGIN = 0.15  # fraction of the box's width / height off each side for the inner part
 
@@ -52,18 +53,21 @@ def box_counts(uv: np.ndarray, box) -> tuple[float, int, int]:
     return w * h, int(inside.sum()), int(inner.sum())
 
 
-def kitti_rows(kitti: Path, n_features: int) -> list[tuple[float, int, int]]:
+def kitti_images(kitti: Path) -> dict[str, np.ndarray]:
+    """The grayscale left images of KITTI_06_CARS by name."""
+    images = {}
+    for name in sorted({car[0] for car in KITTI_06_CARS}):
+        path = kitti / "image_0" / f"{name}.png"
+        images[name] = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if images[name] is None:
+            raise SystemExit(f"--kitti: cannot read {path} (expected the kitti-odometry-06 clip)")
+    return images
+
+
+def kitti_rows(images: dict[str, np.ndarray], n_features: int) -> list[tuple[float, int, int]]:
     ext = ORBExtractor(load_config(None, [f"orb.n_features={n_features}", "orb.threads=1"]).orb)
-    rows, cache = [], {}
-    for image, *box in KITTI_06_CARS:
-        if image not in cache:
-            path = kitti / "image_0" / f"{image}.png"
-            gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-            if gray is None:
-                raise SystemExit(f"--kitti: cannot read {path} (expected the kitti-odometry-06 clip)")
-            cache[image] = ext.extract(ext.build_pyramid(gray)).uv
-        rows.append(box_counts(cache[image], box))
-    return rows
+    uv = {name: ext.extract(ext.build_pyramid(gray)).uv for name, gray in images.items()}
+    return [box_counts(uv[name], box) for name, *box in KITTI_06_CARS]
 
 
 def sim_rows(work: Path, scenarios: list[str], seeds: list[int]) -> list[tuple[float, int, int]]:
@@ -71,7 +75,7 @@ def sim_rows(work: Path, scenarios: list[str], seeds: list[int]) -> list[tuple[f
     rows = []
     for scenario in scenarios:
         for seed in seeds:
-            seq = open_sequence(ensure_sequence(work, scenario, seed, 150, "640x480"))
+            seq = open_sequence(ensure_sequence(work, scenario, seed, 150, "{}x{}".format(*SIM_SIZE)))
             w, h = seq.camera.width, seq.camera.height
             for i in range(0, len(seq), 10):
                 boxes = [g.box2d for g in seq.gt_objects(i) if g.cls in ("car", "van", "truck") and g.box2d is not None
@@ -103,11 +107,12 @@ def main() -> None:
     args = ap.parse_args()
     if not (args.kitti / "image_0").is_dir():
         raise SystemExit(f"--kitti: {args.kitti} has no image_0/ (expected the kitti-odometry-06 clip)")
+    images = kitti_images(args.kitti)
     n_sim = load_config(None, []).orb.n_features
-    fair = int(round(n_sim * 1226 * 370 / (640 * 480)))
+    fair = int(round(n_sim * next(iter(images.values())).size / (SIM_SIZE[0] * SIM_SIZE[1])))
     print(f"{'source':30s} {'box px^2':13s} {'boxes':>5s} {'kp/box':>8s} {'kp/1000px':>10s} {'inner/1000':>10s}")
-    report(f"KITTI 06, {n_sim} features", kitti_rows(args.kitti, n_sim))
-    report(f"KITTI 06, {fair} features", kitti_rows(args.kitti, fair))
+    report(f"KITTI 06, {n_sim} features", kitti_rows(images, n_sim))
+    report(f"KITTI 06, {fair} features", kitti_rows(images, fair))
     report(f"sim, {n_sim} features", sim_rows(args.work, args.scenarios, args.seeds))
 
 
