@@ -322,6 +322,10 @@ class OptimConfig:
     # far from the optimum: on captured SLAM windows (KITTI 06, sim static s0) 1e-4 ends ~20x closer to
     # the converged windows in 0.8x the CPU time (5 + 10 iterations), sim static s0 ATE 0.169 -> 0.048 m.
     local_ba_lambda_initial: float = 1e-4
+    # Static local BA's solver: "schur" = LM in numpy on the reduced camera system (optim/schur_lm.py, the
+    # points eliminated in closed form), "gtsam" = gtsam's LM on built-in stereo factors (the reference; the
+    # pose-only and the BA with objects always use gtsam). Same steps and optimum; see schur_lm.py for speed.
+    local_ba_solver: Literal["schur", "gtsam"] = "schur"
     diagonal_damping: bool = False
     # True: lambda scaled by a fixed factor 10 after each step (gtsam's default); False: Nielsen's update
     # from the step's model fidelity. Measured on bench_ba.py: False rejects fewer steps, the same cost
@@ -347,6 +351,9 @@ class OptimConfig:
                self.local_ba_iterations_refine) < 0:
             raise ConfigError("optim.ba_iterations_robust/ba_iterations_refine/local_ba_iterations_robust/"
                               "local_ba_iterations_refine: expected >= 0")
+        if self.local_ba_solver == "schur" and self.diagonal_damping:
+            raise ConfigError("optim.diagonal_damping=true: the static local BA's 'schur' solver damps with lambda * I; "
+                              "set optim.local_ba_solver=gtsam for Marquardt's diag(H) damping")
         if not (self.pose_relative_error_tol >= 0 and self.ba_relative_error_tol >= 0):
             raise ConfigError("optim.pose_relative_error_tol/ba_relative_error_tol: expected >= 0")
         if not (self.lambda_initial > 0 and self.local_ba_lambda_initial > 0):

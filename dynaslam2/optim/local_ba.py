@@ -40,6 +40,7 @@ from dynaslam2.optim.gtsam_utils import (
     lm_params,
 )
 from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, is_stereo, residuals
+from dynaslam2.optim.schur_lm import schur_levenberg_marquardt
 
 FIXED_POSE_SIGMA = 1e-9  # prior sigma holding a fixed keyframe (its returned pose is the input, exactly)
 POINT_KEY_BASE = 2**31  # with stable ids, keyframe id k is gtsam key k and point id j key POINT_KEY_BASE + j
@@ -88,8 +89,9 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
     Fixed keyframes stay exactly as given (held by strong priors: measured ~2x faster than
     NonlinearEquality, which makes gtsam eliminate with QR); with none fixed, the first keyframe fixes
     the gauge. Points that the kept observations cannot determine (a single monocular observation)
-    are left unchanged. `cache` (needs the problem's stable ids) reuses the robust stage's stereo factors
-    of observations that the previous call also had.
+    are left unchanged. `cfg.local_ba_solver` runs the LM stages in numpy (optim/schur_lm.py, the default)
+    or in gtsam; with gtsam, `cache` (needs the problem's stable ids) reuses the robust stage's stereo
+    factors of observations that the previous call also had.
     """
     _check(problem)
     if cache is not None and problem.kf_ids is None:
@@ -104,24 +106,9 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
     initial_chi2, _ = _chi2_depth(problem, T_c_w, X_w, camera)
     stereo = is_stereo(problem.meas)
 
-    # keys for the keyframes and determined points of the whole window, kept through both stages
     use = determined_observations(problem, np.ones(len(problem.obs_kf), dtype=bool), stereo)
-    kf_idx = np.flatnonzero(np.bincount(problem.obs_kf[use], minlength=len(T_c_w)) > 0)
-    pt_idx = np.flatnonzero(np.bincount(problem.obs_pt[use], minlength=len(X_w)) > 0)
-    if problem.kf_ids is None:
-        pose_keys, point_keys = allocate_keys(len(kf_idx), len(pt_idx))
-    else:  # increasing ids: key order is index order, as extract_poses / extract_points return them
-        pose_keys = np.asarray(problem.kf_ids, dtype=np.int64)[kf_idx]
-        point_keys = POINT_KEY_BASE + np.asarray(problem.pt_ids, dtype=np.int64)[pt_idx]
-    kf_key = np.full(len(T_c_w), -1, dtype=np.int64)
-    kf_key[kf_idx] = pose_keys
-    pt_key = np.full(len(X_w), -1, dtype=np.int64)
-    pt_key[pt_idx] = point_keys
-    values = gtsam.Values()
-    insert_poses(values, pose_keys, inverse(T_c_w[kf_idx]))
-    insert_points(values, point_keys, X_w[pt_idx])
-    fixed_keys = pose_keys[fixed[kf_idx]] if fixed[kf_idx].any() else pose_keys[:1]
-
+    stages = _SchurStages(problem, fixed, camera, cfg) if cfg.local_ba_solver == "schur" else \
+        _GtsamStages(problem, fixed, use, T_c_w, X_w, camera, cfg, cache)
     iterations = 0
     timings_ms = {"build": 1e3 * (time.perf_counter() - t_start), "solve": 0.0}
     for robust, n_iter in ((True, cfg.local_ba_iterations_robust), (False, cfg.local_ba_iterations_refine)):
@@ -130,39 +117,10 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
         if not robust:
             c2, depth = _chi2_depth(problem, T_c_w, X_w, camera)
             use = determined_observations(problem, (c2 <= th) & (depth > cfg.min_depth), stereo)
-            # points no longer determined and free keyframes left without observations keep their estimate
-            dropped_pt = np.setdiff1d(pt_idx, problem.obs_pt[use])
-            still_used = np.concatenate([problem.obs_kf[use], kf_idx[np.isin(kf_key[kf_idx], fixed_keys)]])
-            dropped_kf = np.setdiff1d(kf_idx, still_used)
-            for key in np.concatenate([pt_key[dropped_pt], kf_key[dropped_kf]]).tolist():
-                values.erase(key)
-            pt_idx = np.setdiff1d(pt_idx, dropped_pt)
-            kf_idx = np.setdiff1d(kf_idx, dropped_kf)
         if n_iter == 0 or not use.any():
             continue
-        t_build = time.perf_counter()
-        graph = gtsam.NonlinearFactorGraph()
-        prior = gtsam.noiseModel.Isotropic.Sigma(6, FIXED_POSE_SIGMA)
-        for key in fixed_keys.tolist():
-            graph.addPriorPose3(key, values.atPose3(key), prior)
-        # Huber on the whole 3-dof stereo residual (Python-built stereo factors); without kernel the
-        # C++-built projection pairs have exactly the same cost at ~1/6 of the build time.
-        args = (graph, kf_key[problem.obs_kf[use]], pt_key[problem.obs_pt[use]], problem.meas[use],
-                problem.inv_sigma2[use], camera)
-        if robust:
-            add_stereo_factors(*args, np.sqrt(cfg.chi2_mono), np.sqrt(cfg.chi2_stereo), cache)
-        else:
-            add_stereo_projection_factors(*args, None, None)
-        params = lm_params(cfg, n_iter, cfg.ba_relative_error_tol, np.concatenate([pt_key[pt_idx], kf_key[kf_idx]]),
-                           cfg.local_ba_lambda_initial)
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
-        t_solve = time.perf_counter()
-        values = optimizer.optimize()
-        timings_ms["build"] += 1e3 * (t_solve - t_build)
-        timings_ms["solve"] += 1e3 * (time.perf_counter() - t_solve)
-        iterations += optimizer.iterations()
-        T_c_w[kf_idx] = inverse(extract_poses(values))
-        X_w[pt_idx] = extract_points(values)
+        T_c_w, X_w, n = stages.run(use, robust, n_iter, th, T_c_w, X_w, timings_ms)
+        iterations += n
 
     final_chi2, final_depth = _chi2_depth(problem, T_c_w, X_w, camera)
     T_c_w[fixed] = problem.T_c_w[fixed]
@@ -175,6 +133,89 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
         final_error=float(huber_cost(final_chi2, th).sum()),
         timings_ms=timings_ms,
     )
+
+
+class _SchurStages:
+    """The LM stages in numpy (optim/schur_lm.py): every stage starts from the current arrays."""
+
+    def __init__(self, problem: BAProblem, fixed: np.ndarray, camera: StereoCamera, cfg: OptimConfig) -> None:
+        self.problem, self.fixed, self.camera, self.cfg = problem, fixed, camera, cfg
+
+    def run(self, use: np.ndarray, robust: bool, n_iter: int, th: np.ndarray, T_c_w: np.ndarray, X_w: np.ndarray,
+            timings_ms: dict[str, float]) -> tuple[np.ndarray, np.ndarray, int]:
+        p, cfg = self.problem, self.cfg
+        t0 = time.perf_counter()
+        # the gauge as the gtsam stages: the fixed keyframes with observations, else the first observed one
+        observed = np.bincount(p.obs_kf[use], minlength=len(T_c_w)) > 0
+        free = observed & ~self.fixed
+        if not (observed & self.fixed).any():
+            free[np.flatnonzero(observed)[0]] = False
+        T_c_w, X_w, n = schur_levenberg_marquardt(
+            T_c_w, free, X_w, p.obs_kf[use], p.obs_pt[use], p.meas[use], p.inv_sigma2[use], self.camera,
+            cfg.min_depth, th[use] if robust else None, n_iter, cfg.local_ba_lambda_initial,
+            cfg.ba_relative_error_tol, cfg.lambda_fixed_factor)
+        timings_ms["solve"] += 1e3 * (time.perf_counter() - t0)
+        return T_c_w, X_w, n
+
+
+class _GtsamStages:
+    """The LM stages in gtsam: keys for the keyframes and determined points of the whole window, kept
+    through both stages (the refine stage erases those its observations no longer determine)."""
+
+    def __init__(self, problem: BAProblem, fixed: np.ndarray, use: np.ndarray, T_c_w: np.ndarray, X_w: np.ndarray,
+                 camera: StereoCamera, cfg: OptimConfig, cache: StereoFactorCache | None) -> None:
+        self.problem, self.camera, self.cfg, self.cache = problem, camera, cfg, cache
+        self.kf_idx = np.flatnonzero(np.bincount(problem.obs_kf[use], minlength=len(T_c_w)) > 0)
+        self.pt_idx = np.flatnonzero(np.bincount(problem.obs_pt[use], minlength=len(X_w)) > 0)
+        if problem.kf_ids is None:
+            pose_keys, point_keys = allocate_keys(len(self.kf_idx), len(self.pt_idx))
+        else:  # increasing ids: key order is index order, as extract_poses / extract_points return them
+            pose_keys = np.asarray(problem.kf_ids, dtype=np.int64)[self.kf_idx]
+            point_keys = POINT_KEY_BASE + np.asarray(problem.pt_ids, dtype=np.int64)[self.pt_idx]
+        self.kf_key = np.full(len(T_c_w), -1, dtype=np.int64)
+        self.kf_key[self.kf_idx] = pose_keys
+        self.pt_key = np.full(len(X_w), -1, dtype=np.int64)
+        self.pt_key[self.pt_idx] = point_keys
+        self.values = gtsam.Values()
+        insert_poses(self.values, pose_keys, inverse(T_c_w[self.kf_idx]))
+        insert_points(self.values, point_keys, X_w[self.pt_idx])
+        self.fixed_keys = pose_keys[fixed[self.kf_idx]] if fixed[self.kf_idx].any() else pose_keys[:1]
+
+    def run(self, use: np.ndarray, robust: bool, n_iter: int, th: np.ndarray, T_c_w: np.ndarray, X_w: np.ndarray,
+            timings_ms: dict[str, float]) -> tuple[np.ndarray, np.ndarray, int]:
+        p, cfg, kf_key, pt_key = self.problem, self.cfg, self.kf_key, self.pt_key
+        t_build = time.perf_counter()
+        if not robust:
+            # points no longer determined and free keyframes left without observations keep their estimate
+            dropped_pt = np.setdiff1d(self.pt_idx, p.obs_pt[use])
+            still_used = np.concatenate([p.obs_kf[use], self.kf_idx[np.isin(kf_key[self.kf_idx], self.fixed_keys)]])
+            dropped_kf = np.setdiff1d(self.kf_idx, still_used)
+            for key in np.concatenate([pt_key[dropped_pt], kf_key[dropped_kf]]).tolist():
+                self.values.erase(key)
+            self.pt_idx = np.setdiff1d(self.pt_idx, dropped_pt)
+            self.kf_idx = np.setdiff1d(self.kf_idx, dropped_kf)
+        graph = gtsam.NonlinearFactorGraph()
+        prior = gtsam.noiseModel.Isotropic.Sigma(6, FIXED_POSE_SIGMA)
+        for key in self.fixed_keys.tolist():
+            graph.addPriorPose3(key, self.values.atPose3(key), prior)
+        # Huber on the whole 3-dof stereo residual (Python-built stereo factors); without kernel the
+        # C++-built projection pairs have exactly the same cost at ~1/6 of the build time.
+        args = (graph, kf_key[p.obs_kf[use]], pt_key[p.obs_pt[use]], p.meas[use], p.inv_sigma2[use], self.camera)
+        if robust:
+            add_stereo_factors(*args, np.sqrt(cfg.chi2_mono), np.sqrt(cfg.chi2_stereo), self.cache)
+        else:
+            add_stereo_projection_factors(*args, None, None)
+        params = lm_params(cfg, n_iter, cfg.ba_relative_error_tol,
+                           np.concatenate([pt_key[self.pt_idx], kf_key[self.kf_idx]]), cfg.local_ba_lambda_initial)
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, self.values, params)
+        t_solve = time.perf_counter()
+        self.values = optimizer.optimize()
+        timings_ms["build"] += 1e3 * (t_solve - t_build)
+        timings_ms["solve"] += 1e3 * (time.perf_counter() - t_solve)
+        T_c_w, X_w = T_c_w.copy(), X_w.copy()
+        T_c_w[self.kf_idx] = inverse(extract_poses(self.values))
+        X_w[self.pt_idx] = extract_points(self.values)
+        return T_c_w, X_w, optimizer.iterations()
 
 
 def determined_observations(problem: BAProblem, use: np.ndarray, stereo: np.ndarray) -> np.ndarray:

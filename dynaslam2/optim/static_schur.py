@@ -91,17 +91,30 @@ class StaticSchur:
         return -np.einsum("pij,pj->pi", self.H_pp_inv, rhs)
 
 
-def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
-                 meas: np.ndarray, inv_sigma2: np.ndarray, camera: StereoCamera, min_depth: float,
-                 delta2: np.ndarray | None, damping: float) -> StaticSchur:
+@dataclass
+class StaticLinearization:
+    """The static terms linearized at one estimate: whitened, Huber-weighted Jacobian rows and residuals
+    of every observation (the camera columns (omega, nu) of T_w_c Exp(omega, nu), then the point's X_w)."""
+
+    obs_kf: np.ndarray  # (M,) camera of each observation
+    obs_pt: np.ndarray  # (M,) point of each observation
+    J: np.ndarray  # (M, 3, 9)
+    r: np.ndarray  # (M, 3) whitened, weighted residuals (rows of monocular observations: third 0)
+    cost: float  # 1/2 sum |r|^2
+
+    def model_cost(self, d_cams: np.ndarray, d_points: np.ndarray) -> float:
+        """1/2 sum |J d + r|^2, the linear model's cost for (K, 6) camera and (P, 3) point increments."""
+        d = np.concatenate([d_cams[self.obs_kf], d_points[self.obs_pt]], axis=1)
+        e = np.einsum("mij,mj->mi", self.J, d) + self.r
+        return 0.5 * float(np.einsum("ij,ij->", e, e))
+
+
+def linearize_static(T_c_w: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
+                     meas: np.ndarray, inv_sigma2: np.ndarray, camera: StereoCamera, min_depth: float,
+                     delta2: np.ndarray | None) -> StaticLinearization:
     """Linearize the given observations at (T_c_w, X_w), with Huber weights as gtsam's Robust model
-    (`delta2`: (M,) delta^2 per observation; None: no kernel), and eliminate their points, each
-    point's block damped as Levenberg-Marquardt's H_pp + damping I (whitened units): the points take one
-    step, and far points (depth information ~1e-6 at a few hundred metres) would otherwise jump by their
-    depth for a millimetre of camera motion; damping 0 is the plain Schur complement (every point
-    determined). `free`: (K,) bool, the cameras kept as variables (the others are constants).
-    Observations closer than `min_depth` contribute nothing."""
-    K = len(T_c_w)
+    (`delta2`: (M,) delta^2 per observation; None: no kernel). Observations closer than `min_depth`
+    contribute nothing."""
     R, t = T_c_w[obs_kf, :3, :3], T_c_w[obs_kf, :3, 3]
     X_c = np.einsum("mij,mj->mi", R, X_w[obs_pt]) + t
     r = residuals(camera, X_c, meas)
@@ -131,23 +144,31 @@ def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: n
     J[:, 1, 6:] = b[:, None] * R[:, 1] + d[:, None] * R[:, 2]
     J[:, 2, 6:] = a2[:, None] * R[:, 0] + e[:, None] * R[:, 2]
     r = sw[:, None] * r
-    cost = 0.5 * float(np.einsum("ij,ij->", r, r))
+    return StaticLinearization(obs_kf, obs_pt, J, r, 0.5 * float(np.einsum("ij,ij->", r, r)))
+
+
+def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) -> StaticSchur:
+    """Eliminate the points of a linearization, each point's block damped as Levenberg-Marquardt's
+    H_pp + damping I (whitened units); damping 0 is the plain Schur complement (every point determined).
+    `free`: (K,) bool, the cameras kept as variables (the others are constants)."""
+    J, r = lin.J, lin.r
     JT = J.transpose(0, 2, 1)
     N = JT @ J  # (M, 9, 9) normal-equation blocks of each observation: [[H_cc, W], [W^T, H_pp]]
     g = (JT @ r[:, :, None])[:, :, 0]  # (M, 9)
-    points, obs_point = np.unique(obs_pt, return_inverse=True)
+    points, obs_point = np.unique(lin.obs_pt, return_inverse=True)
     n_p = len(points)
     H_pp = _sum_by(obs_point, np.ascontiguousarray(N[:, 6:, 6:]), n_p)
     g_p = _sum_by(obs_point, g[:, 6:], n_p)
     H_pp_inv = np.linalg.inv(H_pp + damping * np.eye(3))
 
+    K = len(free)
     cams = np.flatnonzero(free)
     C, n = len(cams), 6 * len(cams)
     cam_row = np.full(K, -1, dtype=np.int64)
     cam_row[cams] = np.arange(C)
-    on_free = np.flatnonzero(cam_row[obs_kf] >= 0)
-    on_free = on_free[np.lexsort((obs_point[on_free], obs_kf[on_free]))]  # by camera, then point
-    oc, op = cam_row[obs_kf[on_free]], obs_point[on_free]
+    on_free = np.flatnonzero(cam_row[lin.obs_kf] >= 0)
+    on_free = on_free[np.lexsort((obs_point[on_free], lin.obs_kf[on_free]))]  # by camera, then point
+    oc, op = cam_row[lin.obs_kf[on_free]], obs_point[on_free]
     N, g = N[on_free], g[on_free]
     W = N[:, :6, 6:]  # (M', 6, 3) H_cp block of each observation
     S = np.zeros((C, 6, C, 6))
@@ -160,11 +181,22 @@ def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: n
     Us = sp.bsr_matrix((U, op, indptr), shape=(n, 3 * n_p))
     S = S.reshape(n, n) - (Us @ Us.T).toarray()
     s = s - _sum_by(oc, (W @ (H_pp_inv[op] @ g_p[op, :, None]))[:, :, 0], C).ravel()
-    return StaticSchur(cams, S, s, points, H_pp_inv, g_p, oc, op, W, cost)
+    return StaticSchur(cams, S, s, points, H_pp_inv, g_p, oc, op, W, lin.cost)
+
+
+def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
+                 meas: np.ndarray, inv_sigma2: np.ndarray, camera: StereoCamera, min_depth: float,
+                 delta2: np.ndarray | None, damping: float) -> StaticSchur:
+    """`linearize_static` then `reduce_static`: the static terms at (T_c_w, X_w) reduced to the free
+    cameras, each point's block damped by `damping` (the points take one step: far points, depth
+    information ~1e-6 at a few hundred metres, would otherwise jump by their depth for a millimetre of
+    camera motion)."""
+    lin = linearize_static(T_c_w, X_w, obs_kf, obs_pt, meas, inv_sigma2, camera, min_depth, delta2)
+    return reduce_static(lin, free, damping)
 
 
 def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """(n, ...) sums of the rows of `values` grouped by `index` (one sparse product)."""
     m = len(index)
     group = sp.csr_matrix((np.ones(m), (index, np.arange(m))), shape=(n, m))
-    return np.asarray(group @ values.reshape(m, -1)).reshape((n,) + values.shape[1:])
+    return np.asarray(group @ values.reshape(m, int(np.prod(values.shape[1:])))).reshape((n,) + values.shape[1:])
