@@ -249,13 +249,12 @@ class ObjectOptimConfig:
     # back-substitution; False = every static point a variable, eq. (1) relinearized at every LM iteration (the
     # exact joint problem). Measured on the captured windows of traffic s0/s1 and following s0 640x480: 0.23-0.24x
     # the CPU time of the joint windows (median ~65 ms against ~285), lower final cost on 62 of 64
-    # (object_ba.py's docstring). Off by default: end to end (dynamic mode, traffic and following s0-s2, 150 fr)
-    # the mean ego ATE went 0.026 -> 0.034 m (traffic s1 0.026 -> 0.042, s2 0.021 -> 0.042), object ATE
-    # 0.48 -> 0.53 m; the exact form run closer to convergence (ba_relative_error_tol 1e-3) moves the same way
-    # (traffic s2 0.058, following s0 0.022 -> 0.031 m): the window optimum, not the reduction, costs accuracy.
-    # Re-measured after the object-weak keyframes dropped their static BA (8 sequences of bench_dynamic, same
-    # run): median fps 4.72 -> 6.29, ego ATE 0.0271 -> 0.0289 m, object ATE 0.382 -> 0.378 m, id switches 23 -> 32.
-    static_reduced: bool = False
+    # (object_ba.py's docstring). End to end (dynamic mode, bench_dynamic's traffic, following, crossing and
+    # static s0-s2, 150 fr, 640x480, same code otherwise), False -> True: mean ego ATE 0.0283 -> 0.0273 m (lower
+    # on 7 of 12), object ATE 0.298 -> 0.297 m, TP 0.732 -> 0.731, id switches 60 -> 61; traffic s0's 31 joint
+    # keyframes: median BA with objects 896 -> 215 ms CPU (2 loaded cores). (Measured worse at earlier states of
+    # the object tracking, when object ATE was ~0.5 m: ego 0.026 -> 0.034 m on traffic and following s0-s2.)
+    static_reduced: bool = True
     # LM damping (whitened units) of each static point's block in that reduction (the points take one step):
     # without it, far points (depth information ~1e-6) jump by hundreds of metres for a millimetre of camera
     # motion. Summed final cost on the 50 windows of traffic s0: 1e-6 / 1e-4 / 1e-2 / 1 -> 146694 / 146660 /

@@ -1,14 +1,16 @@
 """Local bundle adjustment over a covisible window, the rest fixed (ORB-SLAM2's LocalBundleAdjustment).
 
-The problem is plain arrays (`BAProblem`); gtsam stays inside. Keyframe `k` is the gtsam Pose3
-`T_w_c` at key `pose_keys[k]`, point `j` the Point3 `X_w` at `point_keys[j]` (`allocate_keys`); a
-later block of variables (objects) adds a size to `allocate_keys` and its own factors.
+The problem is plain arrays (`BAProblem`). The LM stages run in numpy (`optim.local_ba_solver`
+"schur", the default: optim/schur_lm.py, the points eliminated in closed form) or in gtsam ("gtsam", the
+reference: the same steps to 1e-9 m, tests/test_schur_lm.py). With gtsam, keyframe `k` is the Pose3
+`T_w_c` at key `pose_keys[k]`, point `j` the Point3 `X_w` at `point_keys[j]` (`allocate_keys`).
 
-Cost (SLAM windows of sim static 640x480: ~3300 points, ~14.7k observations; 2 loaded cores): one LM
-iteration is gtsam's sequential Cholesky elimination (~50-70 ms, points first), linearization (~15-20 ms)
-and two error evaluations; with the default single robust iteration (`OptimConfig.local_ba_*`) building
-the graph (`add_stereo_factors`, stereo factors made in a Python loop, ~3.3 us each) is ~1/4 and the
-Values ~5%. Measured and dropped: numpy Schur complement on gtsam's linearization (`sparseJacobian_`
+Cost of the gtsam solver (SLAM windows of sim static 640x480: ~3300 points, ~14.7k observations; 2 loaded
+cores): one LM iteration is gtsam's sequential Cholesky elimination (~50-70 ms, points first), linearization
+(~15-20 ms) and two error evaluations; with the default single robust iteration (`OptimConfig.local_ba_*`)
+building the graph (`add_stereo_factors`, stereo factors made in a Python loop, ~3.3 us each) is ~1/4 and
+the Values ~5%: the numpy solver does the same iteration without a graph (schur_lm.py for the figures).
+Measured and dropped for gtsam: numpy Schur complement on gtsam's linearization (`sparseJacobian_`
 alone costs as much as `linearize`: <= 1.4x per iteration for much code), C++-built projection pairs
 for the robust stage too (1.03x: cheaper build, costlier elimination), gtsam's SfmLevenbergMarquardtOptimizer
 (Full and Schur modes, 1.1-2.5x slower), smart factors (SmartProjectionRigFactor with per-level scaled

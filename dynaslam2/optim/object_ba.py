@@ -35,7 +35,7 @@ keyframes of the last `cfg.objects.tail_seconds`, `temporal_tail`), the static p
 constants (one pose-only factor per camera); both: everything jointly.
 
 Both, after the static local BA (`problem.static_optimized`: the caller's `objects.static_ba_first`,
-its outliers erased) with `cfg.objects.static_reduced` (opt-in): the static terms (eq. 1) are
+its outliers erased) with `cfg.objects.static_reduced` (the default): the static terms (eq. 1) are
 linearized once at the static BA's estimate (Huber weights there) and reduced to the free cameras by
 eliminating the static points (optim/static_schur.py, each point block damped by
 `static_point_damping`): one factor on the cameras holding the quadratic model of the static cost.
@@ -47,8 +47,7 @@ cameras by ~mm, where the model is exact to first order. After a converged stati
 same cameras and objects (tests/test_object_ba.py); on captured SLAM windows (traffic s0, following
 s0) the reduced form ends ~4x closer to the converged exact optimum than the exact form with
 ORB-SLAM2's iteration budget (cameras: median 0.6 / 0.4 mm against 2.5 / 1.8 mm; final cost median
-2.6 / 2.2 against 4.3 / 4.6 above the converged one). End to end it costs ego accuracy, as running the
-exact form closer to convergence does (config.py): off by default.
+2.6 / 2.2 against 4.3 / 4.6 above the converged one). End to end the two are equally accurate (config.py).
 
 Cost (this shared 2-core machine under load ~9, CPU time; windows saved by `bench_object_ba.py
 --capture` from 640x480 150-frame dynamic runs, replayed with `--compare` interleaved in one process).
