@@ -152,13 +152,14 @@ def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) ->
     H_pp + damping I (whitened units); damping 0 is the plain Schur complement (every point determined).
     `free`: (K,) bool, the cameras kept as variables (the others are constants)."""
     J, r = lin.J, lin.r
-    JT = J.transpose(0, 2, 1)
-    N = JT @ J  # (M, 9, 9) normal-equation blocks of each observation: [[H_cc, W], [W^T, H_pp]]
-    g = (JT @ r[:, :, None])[:, :, 0]  # (M, 9)
     points, obs_point = np.unique(lin.obs_pt, return_inverse=True)
     n_p = len(points)
-    H_pp = _sum_by(obs_point, np.ascontiguousarray(N[:, 6:, 6:]), n_p)
-    g_p = _sum_by(obs_point, g[:, 6:], n_p)
+    # normal-equation blocks [[H_cc, W], [W^T, H_pp]] and gradient (g_c, g_p) of each observation, the camera
+    # ones only where the camera is free
+    Jp = np.ascontiguousarray(J[:, :, 6:])
+    JpT = Jp.transpose(0, 2, 1)
+    H_pp = _sum_by(obs_point, JpT @ Jp, n_p)
+    g_p = _sum_by(obs_point, (JpT @ r[:, :, None])[:, :, 0], n_p)
     H_pp_inv = np.linalg.inv(H_pp + damping * np.eye(3))
 
     K = len(free)
@@ -167,15 +168,16 @@ def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) ->
     cam_row = np.full(K, -1, dtype=np.int64)
     cam_row[cams] = np.arange(C)
     on_free = np.flatnonzero(cam_row[lin.obs_kf] >= 0)
-    on_free = on_free[np.lexsort((obs_point[on_free], lin.obs_kf[on_free]))]  # by camera, then point
+    on_free = on_free[np.argsort(lin.obs_kf[on_free], kind="stable")]  # grouped by camera: the BSR rows below
     oc, op = cam_row[lin.obs_kf[on_free]], obs_point[on_free]
-    N, g = N[on_free], g[on_free]
-    W = N[:, :6, 6:]  # (M', 6, 3) H_cp block of each observation
+    Jc = J[on_free, :, :6]
+    JcT = Jc.transpose(0, 2, 1)
+    W = JcT @ Jp[on_free]  # (M', 6, 3) H_cp block of each observation
     S = np.zeros((C, 6, C, 6))
-    S[np.arange(C), :, np.arange(C), :] = _sum_by(oc, np.ascontiguousarray(N[:, :6, :6]), C)
-    s = _sum_by(oc, g[:, :6], C).ravel()
+    S[np.arange(C), :, np.arange(C), :] = _sum_by(oc, JcT @ Jc, C)
+    s = _sum_by(oc, (JcT @ r[on_free, :, None])[:, :, 0], C).ravel()
     # reduction sum_p W_p H_pp^-1 W_p^T = U U^T, U = W chol(H_pp^-1): a block-sparse (6C, 3P) matrix whose
-    # 6x3 blocks are the observations in camera then point order (scipy's BSR product: ~3x its CSR one)
+    # 6x3 blocks are the observations grouped by camera (scipy's BSR product: ~3x its CSR one)
     U = W @ np.linalg.cholesky(H_pp_inv)[op]
     indptr = np.concatenate([[0], np.cumsum(np.bincount(oc, minlength=C))])
     Us = sp.bsr_matrix((U, op, indptr), shape=(n, 3 * n_p))
