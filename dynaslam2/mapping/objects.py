@@ -119,5 +119,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         for k in np.unique(obs_kf[out]).tolist():
             map_.erase_observations(map_.keyframes[k], obs_kp[out][obs_kf[out] == k])
         map_.cull_points(pts[map_.points.n_obs[pts] <= 0])
-        map_.update_point_descriptors_and_normals(pts, mapper.scale_factors)
+        # as the static local BA: a descriptor only changes with the observations, the normals with the points
+        map_.update_point_descriptors_and_normals(np.unique(obs_pt[out]), mapper.scale_factors)
+        map_.update_point_descriptors_and_normals(pts, mapper.scale_factors, descriptors=False)
     return result.n_parameters
