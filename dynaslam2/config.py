@@ -243,14 +243,14 @@ class ObjectOptimConfig:
     # (tests/test_object_ba.py) 1 + 0 ends farther than 5 + 10 from lambda 1: kept at ORB-SLAM2's settings
     lambda_initial: float = 1.0
     min_observation_points: int = 5  # an object observation with fewer used point observations keeps its pose
-    # Joint case (camera and object weak) after the static local BA (objects.static_ba_first): True = the static
-    # terms (eq. 1) linearized once at its estimate (Huber weights there) and reduced to the free cameras by
-    # eliminating the static points (optim/static_schur.py), the points following the cameras by
-    # back-substitution; False = every static point a variable, eq. (1) relinearized at every LM iteration (the
+    # Joint case (camera and object weak): True = the static terms (eq. 1) linearized once at the window's
+    # estimate (Huber weights there; after the static local BA with objects.static_ba_first) and reduced to
+    # the free cameras by eliminating the static points (optim/static_schur.py), the points following the
+    # cameras by back-substitution; False = every static point a variable, eq. (1) relinearized at every LM iteration (the
     # exact joint problem). Measured on the captured windows of traffic s0/s1 and following s0 640x480: 0.23-0.24x
     # the CPU time of the joint windows (median ~65 ms against ~285), lower final cost on 62 of 64
     # (object_ba.py's docstring). End to end (dynamic mode, bench_dynamic's traffic, following, crossing and
-    # static s0-s2, 150 fr, 640x480, same code otherwise), False -> True: mean ego ATE 0.0283 -> 0.0273 m (lower
+    # static s0-s2, 150 fr, 640x480, objects.static_ba_first on), False -> True: mean ego ATE 0.0283 -> 0.0273 m (lower
     # on 7 of 12), object ATE 0.298 -> 0.297 m, TP 0.732 -> 0.731, id switches 60 -> 61; traffic s0's 31 joint
     # keyframes: median BA with objects 896 -> 215 ms CPU (2 loaded cores). (Measured worse at earlier states of
     # the object tracking, when object ATE was ~0.5 m: ego 0.026 -> 0.034 m on traffic and following s0-s2.)
@@ -445,16 +445,20 @@ class ObjectsConfig:
     cull_found_ratio: float = 0.25
     # Bundle adjustment with objects on keyframes (III-D); False: object poses from tracking only.
     ba: bool = True
-    # The static local BA (fast, converged: optim.local_ba_*) also runs on keyframes where both the camera
-    # and an object are weak, before the joint BA, so that it starts from the static optimum; its LM
-    # (optim.ba_*, 5 + 10 from lambda 1, 1 % stop) leaves the static part unconverged otherwise. Not a paper
-    # step (ORB-SLAM2 runs its local BA on every keyframe). 150 frames 640x480 seed 0, dynamic mode, off -> on:
-    # ego ATE traffic 0.056 -> 0.020 m, following 0.022 -> 0.017 m; object ATE 0.548 -> 0.541 / 0.423 ->
-    # 0.365 m; local mapping ~1.8x per keyframe. Keyframes inserted for an object only get the paper's
-    # object-weak BA alone (III-D: static points constant): running the static local BA there too gave, on
-    # the 8 sequences of bench_dynamic (150 fr, 640x480, same run), the same mean ego ATE (0.0270 against
-    # 0.0271 m without), object ATE 0.395 against 0.382 m, median BA per keyframe 157 against 125 ms.
-    static_ba_first: bool = True
+    # The static local BA also runs on keyframes where both the camera and an object are weak, before the
+    # joint BA. Not a paper step (ORB-SLAM2 runs its local BA on every keyframe). Needed by the exact joint
+    # form (optim.objects.static_reduced=false), whose LM (optim.ba_*, 5 + 10 from lambda 1, 1 % stop) leaves
+    # the static part unconverged otherwise: 150 frames 640x480 seed 0, off -> on: ego ATE traffic 0.056 ->
+    # 0.020 m, following 0.022 -> 0.017 m. The reduced form (the default) solves the static terms' quadratic
+    # model, which is what the static BA's single LM iteration does: on bench_dynamic's 12 sequences (traffic,
+    # following, crossing, static s0-s2, 150 fr 640x480), on -> off: mean ego ATE 0.0273 -> 0.0268 m, object
+    # ATE 0.297 -> 0.287 m, TP 0.731 -> 0.732, id switches 61 -> 65 (crossing s1/s2 +3/+1), median BA per
+    # keyframe lower on 9 of 12 (one linearization of the static terms instead of two). Keyframes inserted
+    # for an object only get the paper's object-weak BA alone (III-D: static points constant): running the
+    # static local BA there too gave, on the 8 sequences of bench_dynamic (150 fr, 640x480, same run), the same
+    # mean ego ATE (0.0270 against 0.0271 m without), object ATE 0.395 against 0.382 m, median BA per keyframe
+    # 157 against 125 ms.
+    static_ba_first: bool = False
     # Not in the paper: between BAs, each inlier stereo observation of an object point is averaged
     # into its position in the object frame, weighted by its depth information (1 px disparity at its
     # level), so that points created far away take the depth of closer views.

@@ -98,7 +98,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         timestamps=np.array([map_.keyframes[k].timestamp for k in all_ids]),
         X_o=P.X_o[obj_pts].copy(), pt_obj=np.array([track_row[int(t)] for t in P.track[obj_pts]]),
         oobs_f=oobs_f, oobs_pt=oobs_pt, oobs_meas=oobs_meas, oobs_inv_sigma2=oobs_inv_sigma2,
-        optimize_static=camera_weak, optimize_objects=True, static_optimized=config.objects.static_ba_first,
+        optimize_static=camera_weak, optimize_objects=True,
     )
     result = object_bundle_adjustment(problem, mapper.camera, config.optim)
     if not all(np.all(np.isfinite(a)) for a in (result.T_c_w, result.X_w, result.T_w_o, result.X_o)):

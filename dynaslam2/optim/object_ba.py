@@ -34,16 +34,18 @@ local BA (`local_bundle_adjustment`, objects untouched); `optimize_objects and n
 keyframes of the last `cfg.objects.tail_seconds`, `temporal_tail`), the static points being
 constants (one pose-only factor per camera); both: everything jointly.
 
-Both, after the static local BA (`problem.static_optimized`: the caller's `objects.static_ba_first`,
-its outliers erased) with `cfg.objects.static_reduced` (the default): the static terms (eq. 1) are
-linearized once at the static BA's estimate (Huber weights there) and reduced to the free cameras by
+Both, with `cfg.objects.static_reduced` (the default): the static terms (eq. 1) are linearized once at
+the window's estimate (Huber weights there; after the static local BA, its outliers erased, when the
+caller's `objects.static_ba_first`) and reduced to the free cameras by
 eliminating the static points (optim/static_schur.py, each point block damped by
 `static_point_damping`): one factor on the cameras holding the quadratic model of the static cost.
 LM then iterates on the cameras and the objects only, and the static points follow the cameras'
 increments by back-substitution at the end; no static outlier is reclassified between the stages.
 A stated departure from relinearizing every static term at every iteration (`static_reduced=False`,
-the exact joint problem of III-D): the static part starts at its optimum and the objects move the
-cameras by ~mm, where the model is exact to first order. After a converged static BA both reach the
+the exact joint problem of III-D): a SLAM window starts near its optimum (the new keyframe from
+tracking, the others from earlier BAs), where one linearization is what the static local BA's single
+LM iteration uses too, and the objects move the cameras by ~mm. From a window with its newest keyframe
+1 cm off, or after a converged static BA, both reach the
 same cameras and objects (tests/test_object_ba.py); on captured SLAM windows (traffic s0, following
 s0) the reduced form ends ~4x closer to the converged exact optimum than the exact form with
 ORB-SLAM2's iteration budget (cameras: median 0.6 / 0.4 mm against 2.5 / 1.8 mm; final cost median
@@ -130,9 +132,6 @@ class ObjectBAProblem(BAProblem):
     oobs_inv_sigma2: np.ndarray  # (M2,)
     optimize_static: bool = True  # static points are variables (else constants constraining the cameras)
     optimize_objects: bool = True  # object poses, velocities and points are variables (else untouched)
-    # the static part is the static local BA's result, its outliers removed (objects.static_ba_first): the
-    # joint case may then reduce the static terms to the cameras (cfg.objects.static_reduced)
-    static_optimized: bool = False
 
 
 @dataclass
@@ -207,7 +206,7 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
     structure = _object_structure(problem, use_o, cfg.objects.min_observation_points)
     initial_error = _total_cost(problem, est, structure, camera, cfg)
     schur = None
-    if problem.optimize_static and problem.static_optimized and cfg.objects.static_reduced:
+    if problem.optimize_static and cfg.objects.static_reduced:
         schur, use = _static_reduction(problem, est, fixed, th, camera, cfg)
         T_w_c0, X_w0 = inverse(est.T_c_w[schur.cams]), est.X_w.copy()  # the linearization point
     timings_ms = {"build": 1e3 * (time.perf_counter() - t_start), "solve": 0.0}
