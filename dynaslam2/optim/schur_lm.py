@@ -7,14 +7,20 @@ back-substitutes the points: the same damped step as gtsam's LevenbergMarquardtO
 factors with lambda * I damping (whitened units), points eliminated first (optim.ordering "SCHUR"). The
 schedule is gtsam's as well: a step is taken when the cost falls by more than 1e-3 of the linear
 model's predicted decrease, otherwise lambda grows and the step is solved again; lambda then shrinks by
-Nielsen's rule (or a fixed factor 10), and LM stops after `max_iterations` steps or when the cost falls by
-less than `relative_error_tol` of itself or by less than 1e-5. The predicted decrease is the model's own (cost of the
-weighted residuals minus the model's cost at the step), as in Ceres.
+Nielsen's rule (or a fixed factor 10), and LM stops after `max_iterations` steps or when the cost falls
+by less than `relative_error_tol` of itself or by less than 1e-5. The predicted decrease is the model's
+own (cost of the weighted residuals minus the model's cost at the step), as in Ceres.
 
-A stated replacement of gtsam for the static local BA (optim.local_ba_solver): on the local BA windows
-of sim traffic s0 640x480 (~20 free of 30 keyframes, ~3300 points, ~18k observations) one iteration is
-~4x faster than gtsam's graph build, linearization and elimination (benchmarks/bench_ba.py
---slam-windows), and the two reach the same optimum (tests/test_schur_lm.py).
+A stated replacement of gtsam for the static local BA (optim.local_ba_solver; gtsam's stays as the
+reference, tests/test_schur_lm.py: the same steps to 1e-9 m). Replaying the 59 static local BA windows of
+sim traffic s0 640x480 (150 frames; median 3311 points, 18.4k observations; `python
+benchmarks/bench_ba.py --slam-windows SEQ --slam-frames 150 --compare optim.local_ba_solver=gtsam`): median
+89 ms CPU against gtsam's 194 with its factor cache (0.46x), the same distance from the converged windows
+(0.17 cm) and the same cost, with OPENBLAS_NUM_THREADS=1 (with OpenBLAS's default threads the process CPU
+time also counts its spinning threads: 151 against 169 ms). KITTI 06 clip, static mode end to end: local
+BA 36 against 62 ms per keyframe (wall), the same ATE. Of a call (cProfile on those windows), the point
+elimination and the reduced camera system are ~2/3 (scipy's block-sparse product ~1/4 of that), the
+linearization ~1/8, the cost and chi2 evaluations ~1/6.
 """
 
 from __future__ import annotations
