@@ -101,7 +101,7 @@ class LocalMapper:
         self.log_scale = float(np.log(self.scale_factors[1])) if self.n_levels > 1 else 1.0
         self.recent_points = np.zeros(0, dtype=np.int64)
         self.next_kf_id = 0
-        self.ba_factors = StereoFactorCache()  # the last local BA window's stereo factors, for the next one
+        self.ba_factors = StereoFactorCache()  # the last local BA window's stereo factors (gtsam solver)
 
     def reset(self) -> None:
         """Forget per-map state (a new map segment)."""
