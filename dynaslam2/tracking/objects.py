@@ -292,13 +292,18 @@ class ObjectTracker:
             self._observe(frame, objects, tr, T_w_o, kp[inl], pts[inl], int(inst_ids[inst]), boxes[inst])
             free[kp[inl]] = False
             seen.append(tid)
-        # Unclaimed instances: re-appearing objects or new ones.
+        # Unclaimed instances: re-appearing objects or new ones. The box join's mutual-best test counts the
+        # instances that can still join a track: unclaimed, with enough close keypoints unless tracks coast.
+        can_join = np.array([inst not in claimed and (cfg.coast_max_s > 0 or
+                                                      len(self._instance_points(frame, inst, free)[0]) >= cfg.min_inliers)
+                             for inst in inst_ids.tolist()], dtype=bool)
         for k, inst in enumerate(inst_ids.tolist()):
             if inst in claimed:
                 continue
             cls = CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
+            open_boxes = boxes[can_join & ~np.isin(inst_ids, list(claimed))]
             tid = self._new_object(frame, objects, [tr for tr in active if tr.track_id not in seen and tr.cls == cls],
-                                   pred, inst, boxes[k], boxes, free)
+                                   pred, inst, boxes[k], open_boxes, free)
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
@@ -475,12 +480,7 @@ class ObjectTracker:
         small_new_fraction of its keypoints), creates an object at the centroid of its points with
         identity rotation (III-B)."""
         cfg = self.cfg
-        kp = np.flatnonzero(free & (frame.instance_id == inst))
-        n_instance = len(kp)
-        kp = self._close(frame, kp)
-        X_w = self._world_points(frame, kp)
-        ok = self._compact(X_w)
-        kp, X_w = kp[ok], X_w[ok]
+        kp, X_w, n_instance = self._instance_points(frame, inst, free)
         enough = len(kp) >= cfg.min_inliers
         # Track ids from point votes: most matched keypoints belong to one map object.
         if unseen and enough:
@@ -514,6 +514,16 @@ class ObjectTracker:
         self._observe(frame, objects, tr, make_pose(np.eye(3), centroid), kp, new, inst, box)
         free[kp] = False
         return tr.track_id
+
+    def _instance_points(self, frame: Frame, inst: int, free: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """The free close keypoints of instance `inst` that lie on its compact body, their world points, and
+        the instance's number of free keypoints."""
+        kp = np.flatnonzero(free & (frame.instance_id == inst))
+        n_instance = len(kp)
+        kp = self._close(frame, kp)
+        X_w = self._world_points(frame, kp)
+        ok = self._compact(X_w)
+        return kp[ok], X_w[ok], n_instance
 
     def _join_by_points(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                         inst: int, box: np.ndarray, kp: np.ndarray, X_w: np.ndarray, free: np.ndarray) -> int | None:
