@@ -582,8 +582,9 @@ class ObjectTracker:
                      box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
         """The unseen track measured within `max_gap_s` whose last box, as it was or moved by its
         predicted image motion (wrong when the velocity is, or for a near object whose origin projects
-        off its visible part), overlaps `box` most, if that IoU is >= join_iou and no other instance box
-        of the frame (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
+        off its visible part), overlaps `box` most, if that IoU is >= join_iou and no box of the frame's
+        instances that can still join a track (`boxes`) overlaps that track more (instance-to-instance
+        association, III-B)."""
         cfg = self.cfg
         recent = [tr for tr in unseen if tr.last.box2d is not None
                   and frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
