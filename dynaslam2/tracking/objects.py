@@ -294,19 +294,20 @@ class ObjectTracker:
             seen.append(tid)
         # Unclaimed instances: re-appearing objects or new ones. The box join's mutual-best test counts the
         # instances that can still join a track: unclaimed, with enough close keypoints unless tracks coast.
-        can_join = np.array([inst not in claimed and (cfg.coast_max_s > 0 or
-                                                      len(self._instance_points(frame, inst, free)[0]) >= cfg.min_inliers)
-                             for inst in inst_ids.tolist()], dtype=bool)
-        for k, inst in enumerate(inst_ids.tolist()):
-            if inst in claimed:
-                continue
+        # (Each instance's points once: an instance only takes its own keypoints out of `free`.)
+        open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
+        points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
+        can_join = np.zeros(len(inst_ids), dtype=bool)
+        can_join[open_k] = [cfg.coast_max_s > 0 or len(points[k][0]) >= cfg.min_inliers for k in open_k]
+        for k in open_k:
+            inst = int(inst_ids[k])
             cls = CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
-            open_boxes = boxes[can_join & ~np.isin(inst_ids, list(claimed))]
             tid = self._new_object(frame, objects, [tr for tr in active if tr.track_id not in seen and tr.cls == cls],
-                                   pred, inst, boxes[k], open_boxes, free)
+                                   pred, inst, points[k], boxes[k], boxes[can_join], free)
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
+                can_join[k] = False
         self._cull(objects, seen)
         return self._result(frame, objects, seen, dyn)
 
@@ -472,15 +473,16 @@ class ObjectTracker:
         return m[:3].copy(), m[3:].copy()
 
     def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
-                    inst: int, box: np.ndarray, boxes: np.ndarray, free: np.ndarray) -> int | None:
-        """An unclaimed instance: joins an unseen track (point votes with >= min_inliers close
-        keypoints, then box IoU with a track measured within join_max_gap_s, or within coast_max_s
-        when the instance has fewer close keypoints: no points then) or, with >=
+                    inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, boxes: np.ndarray,
+                    free: np.ndarray) -> int | None:
+        """An unclaimed instance (`points`: its `_instance_points`): joins an unseen track (point votes with
+        >= min_inliers close keypoints, then box IoU with a track measured within join_max_gap_s, or within
+        coast_max_s when the instance has fewer close keypoints: no points then) or, with >=
         min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
         small_new_fraction of its keypoints), creates an object at the centroid of its points with
         identity rotation (III-B)."""
         cfg = self.cfg
-        kp, X_w, n_instance = self._instance_points(frame, inst, free)
+        kp, X_w, n_instance = points
         enough = len(kp) >= cfg.min_inliers
         # Track ids from point votes: most matched keypoints belong to one map object.
         if unseen and enough:
