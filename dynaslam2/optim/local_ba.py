@@ -41,7 +41,7 @@ from dynaslam2.optim.gtsam_utils import (
     insert_poses,
     lm_params,
 )
-from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, is_stereo, residuals
+from dynaslam2.optim.reprojection import chi2_depth, chi2_thresholds, huber_cost, is_stereo
 from dynaslam2.optim.schur_lm import schur_levenberg_marquardt
 
 FIXED_POSE_SIGMA = 1e-9  # prior sigma holding a fixed keyframe (its returned pose is the input, exactly)
@@ -105,7 +105,7 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
     th = chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)
     T_c_w = problem.T_c_w.astype(float).copy()
     X_w = problem.X_w.astype(float).copy()
-    initial_chi2, _ = _chi2_depth(problem, T_c_w, X_w, camera)
+    initial_chi2, _ = static_chi2_depth(problem, T_c_w, X_w, camera)
     stereo = is_stereo(problem.meas)
 
     use = determined_observations(problem, np.ones(len(problem.obs_kf), dtype=bool), stereo)
@@ -117,14 +117,14 @@ def local_bundle_adjustment(problem: BAProblem, camera: StereoCamera, cfg: Optim
         if not robust and n_iter == 0:
             break  # no refine stage: the final classification below is ORB-SLAM2's outlier removal
         if not robust:
-            c2, depth = _chi2_depth(problem, T_c_w, X_w, camera)
+            c2, depth = static_chi2_depth(problem, T_c_w, X_w, camera)
             use = determined_observations(problem, (c2 <= th) & (depth > cfg.min_depth), stereo)
         if n_iter == 0 or not use.any():
             continue
         T_c_w, X_w, n = stages.run(use, robust, n_iter, th, T_c_w, X_w, timings_ms)
         iterations += n
 
-    final_chi2, final_depth = _chi2_depth(problem, T_c_w, X_w, camera)
+    final_chi2, final_depth = static_chi2_depth(problem, T_c_w, X_w, camera)
     T_c_w[fixed] = problem.T_c_w[fixed]
     return BAResult(
         T_c_w=T_c_w,
@@ -229,13 +229,10 @@ def determined_observations(problem: BAProblem, use: np.ndarray, stereo: np.ndar
     return use & ((n_obs >= 2) | (n_stereo >= 1))[problem.obs_pt]
 
 
-def _chi2_depth(
-    problem: BAProblem, T_c_w: np.ndarray, X_w: np.ndarray, camera: StereoCamera
-) -> tuple[np.ndarray, np.ndarray]:
-    """(M,) chi2 and depth of every observation at the given estimate."""
-    R = T_c_w[problem.obs_kf, :3, :3]
-    X_c = np.einsum("mij,mj->mi", R, X_w[problem.obs_pt]) + T_c_w[problem.obs_kf, :3, 3]
-    return chi2(residuals(camera, X_c, problem.meas), problem.inv_sigma2), X_c[:, 2]
+def static_chi2_depth(problem: BAProblem, T_c_w: np.ndarray, X_w: np.ndarray,
+                      camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
+    """(M,) chi2 and depth of every observation of the window at the given estimate."""
+    return chi2_depth(T_c_w, problem.obs_kf, X_w, problem.obs_pt, problem.meas, problem.inv_sigma2, camera)
 
 
 def _check(problem: BAProblem) -> None:

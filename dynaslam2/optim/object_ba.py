@@ -96,6 +96,7 @@ from dynaslam2.optim.local_ba import (
     BAProblem,
     determined_observations,
     local_bundle_adjustment,
+    static_chi2_depth,
 )
 from dynaslam2.optim.object_factors import (
     direct_projection_factor,
@@ -104,7 +105,7 @@ from dynaslam2.optim.object_factors import (
     motion_residuals,
 )
 from dynaslam2.optim.pose_only import pose_only_factor
-from dynaslam2.optim.reprojection import chi2, chi2_thresholds, huber_cost, is_stereo, residuals
+from dynaslam2.optim.reprojection import chi2_depth, chi2_thresholds, huber_cost, is_stereo
 from dynaslam2.optim.static_schur import StaticSchur, static_schur
 
 
@@ -217,7 +218,7 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
             break  # no refine stage: the final classification below removes the outliers
         if not robust:
             if schur is None:  # (reduced: the static terms keep their linearization at the start)
-                c2, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+                c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
                 use = (c2 <= th) & (depth > cfg.min_depth)
             if problem.optimize_objects:
                 c2_o, depth_o = _object_chi2_depth(problem, est, camera)
@@ -246,7 +247,7 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
                            for T0, T in zip(T_w_c0, inverse(est.T_c_w[schur.cams]))]).reshape(-1, 6)
         est.X_w[schur.points] = X_w0[schur.points] + schur.point_steps(d_cams)
     est.T_c_w[fixed] = problem.T_c_w[fixed]
-    c2, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+    c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
     c2_o, depth_o = _object_chi2_depth(problem, est, camera)
     return ObjectBAResult(
         T_c_w=est.T_c_w, X_w=est.X_w, inlier=(c2 <= th) & (depth > cfg.min_depth),
@@ -424,7 +425,7 @@ def _static_reduction(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarra
     """The static terms of the joint case reduced to the free cameras at the current estimate, with the
     Huber kernel (`cfg.objects.static_reduced`); also the (M,) static observations it uses: in front of
     the camera, of determined points."""
-    _, depth = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+    _, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
     use = determined_observations(problem, depth > cfg.min_depth, is_stereo(problem.meas))
     free = ~fixed & (np.bincount(problem.obs_kf[use], minlength=len(fixed)) > 0)
     schur = static_schur(est.T_c_w, free, est.X_w, problem.obs_kf[use], problem.obs_pt[use], problem.meas[use],
@@ -464,27 +465,18 @@ def _read_back(values: gtsam.Values, keys: dict, problem: ObjectBAProblem,
         est.velocity[moving_idx] = np.array([values.atVector(k) for k in vel_keys.tolist()])
 
 
-def _static_chi2_depth(problem: ObjectBAProblem, T_c_w: np.ndarray, X_w: np.ndarray,
-                       camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
-    """(M,) chi2 and depth of every static observation."""
-    R = T_c_w[problem.obs_kf, :3, :3]
-    X_c = np.einsum("mij,mj->mi", R, X_w[problem.obs_pt]) + T_c_w[problem.obs_kf, :3, 3]
-    return chi2(residuals(camera, X_c, problem.meas), problem.inv_sigma2), X_c[:, 2]
-
-
 def _object_chi2_depth(problem: ObjectBAProblem, est: _Estimate, camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
     """(M2,) chi2 and depth of every object-point observation (eq. 2)."""
     T_c_o = est.T_c_w[problem.obj_frames] @ est.T_w_o
-    T = T_c_o[problem.oobs_f]
-    X_c = np.einsum("mij,mj->mi", T[:, :3, :3], est.X_o[problem.oobs_pt]) + T[:, :3, 3]
-    return chi2(residuals(camera, X_c, problem.oobs_meas), problem.oobs_inv_sigma2), X_c[:, 2]
+    return chi2_depth(T_c_o, problem.oobs_f, est.X_o, problem.oobs_pt, problem.oobs_meas, problem.oobs_inv_sigma2,
+                      camera)
 
 
 def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, camera: StereoCamera,
                 cfg: OptimConfig) -> float:
     """Summed Huber cost of eq. (6): reprojection (chi2 thresholds as deltas), eq. (3), eq. (4)."""
     ocfg = cfg.objects
-    c2, _ = _static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+    c2, _ = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
     cost = huber_cost(c2, chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)).sum()
     if not problem.optimize_objects:
         return float(cost)

@@ -41,6 +41,15 @@ def chi2(e: np.ndarray, inv_sigma2: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", e, e) * inv_sigma2
 
 
+def chi2_depth(T_c_x: np.ndarray, obs_frame: np.ndarray, X: np.ndarray, obs_pt: np.ndarray, meas: np.ndarray,
+               inv_sigma2: np.ndarray, camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
+    """(M,) chi2 and depth of observations: point `X[obs_pt]` (in frame x: world, or an object's frame)
+    seen by the camera `T_c_x[obs_frame]`."""
+    T = T_c_x[obs_frame]
+    X_c = np.einsum("mij,mj->mi", T[:, :3, :3], X[obs_pt]) + T[:, :3, 3]
+    return chi2(residuals(camera, X_c, meas), inv_sigma2), X_c[:, 2]
+
+
 def chi2_thresholds(meas: np.ndarray, chi2_mono: float, chi2_stereo: float) -> np.ndarray:
     """(M,) chi-square threshold per observation: 3 dof for stereo, 2 dof for mono."""
     return np.where(is_stereo(meas), chi2_stereo, chi2_mono)

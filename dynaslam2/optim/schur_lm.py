@@ -26,10 +26,11 @@ linearization ~1/8, the cost and chi2 evaluations ~1/6.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import se3_exp
-from dynaslam2.optim.reprojection import chi2, huber_cost, is_stereo, residuals
+from dynaslam2.optim.reprojection import chi2_depth, huber_cost, is_stereo
 from dynaslam2.optim.static_schur import linearize_static, reduce_static
 
 LAMBDA_FACTOR = 10.0  # gtsam's LevenbergMarquardtParams defaults (Nielsen's factor starts there, restarts at 2)
@@ -45,10 +46,8 @@ def robust_cost(T_c_w: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: 
     """Summed Huber cost (`delta2` per observation; None: 1/2 chi2) of the observations. One closer than
     `min_depth` costs as a residual of 2 fx on each coordinate, as gtsam's stereo and projection factors
     return with their cheirality exception off."""
-    X_c = np.einsum("mij,mj->mi", T_c_w[obs_kf, :3, :3], X_w[obs_pt]) + T_c_w[obs_kf, :3, 3]
-    n_rows = np.where(is_stereo(meas), 3.0, 2.0)
-    c2 = np.where(X_c[:, 2] > min_depth, chi2(residuals(camera, X_c, meas), inv_sigma2),
-                  n_rows * (2.0 * camera.fx) ** 2 * inv_sigma2)
+    c2, depth = chi2_depth(T_c_w, obs_kf, X_w, obs_pt, meas, inv_sigma2, camera)
+    c2 = np.where(depth > min_depth, c2, np.where(is_stereo(meas), 3.0, 2.0) * (2.0 * camera.fx) ** 2 * inv_sigma2)
     return float(0.5 * c2.sum() if delta2 is None else huber_cost(c2, delta2).sum())
 
 
@@ -109,10 +108,10 @@ def _damped_step(lin, free: np.ndarray, lam: float):
     d_cams = np.zeros((len(free), 6))
     if n:
         try:
-            L = np.linalg.cholesky(schur.S + lam * np.eye(n))
+            factor = cho_factor(schur.S + lam * np.eye(n))
         except np.linalg.LinAlgError:
             return None
-        d_cams[schur.cams] = -np.linalg.solve(L.T, np.linalg.solve(L, schur.s)).reshape(-1, 6)
+        d_cams[schur.cams] = -cho_solve(factor, schur.s).reshape(-1, 6)
     return d_cams, schur.point_steps(d_cams[schur.cams]), schur.points
 
 
