@@ -254,7 +254,7 @@ def test_q_and_direct_parametrizations_reach_the_same_optimum():
     exact joint form: every static term relinearized."""
     w = window(4, n_keyframes=5, n_static=200, n_object_points=25)
     cfg = OptimConfig(ba_relative_error_tol=0.0, ba_iterations_robust=10, ba_iterations_refine=15, objects=EXACT_JOINT)
-    direct_cfg = dataclasses.replace(cfg, objects=ObjectOptimConfig(parametrization="direct", static_reduced=False))
+    direct_cfg = dataclasses.replace(cfg, objects=dataclasses.replace(EXACT_JOINT, parametrization="direct"))
     t0 = time.process_time()
     q = object_bundle_adjustment(w.problem, CAMERA, cfg)
     t1 = time.process_time()
@@ -328,7 +328,7 @@ def test_reduced_static_terms_near_the_optimum_reach_the_exact_joint_optimum(see
     synthetic window's own start, every camera 5-15 cm off, one linearization ends ~5 cm off.)"""
     w = window(seed, n_static=400, n_object_points=40, outlier_fraction=0.03, noise_scale=0.5)
     exact_cfg = OptimConfig(ba_relative_error_tol=0.0, ba_iterations_robust=30, ba_iterations_refine=30,
-                            objects=ObjectOptimConfig(static_reduced=False))
+                            objects=EXACT_JOINT)
     optimum = object_bundle_adjustment(w.problem, CAMERA, exact_cfg)
     keep = optimum.inlier
     at_optimum = dataclasses.replace(w.problem, T_c_w=optimum.T_c_w, X_w=optimum.X_w, T_w_o=optimum.T_w_o,

@@ -58,6 +58,13 @@ def tracker(*overrides: str) -> ObjectTracker:
     return ObjectTracker(load_config(None, ["mode=dynamic", *overrides]), CAMERA, SCALES, 1.0 / SCALES**2)
 
 
+def track_alone(trk: ObjectTracker, objects: ObjectMap, body: Body, poses: list[np.ndarray]):
+    """Track `body` alone at `poses` in frames 0, 1, ...; the last frame's estimate."""
+    for i, T_w_b in enumerate(poses):
+        (e,) = trk.track(make_frame(i, [(body, T_w_b)]), None, objects).estimates
+    return e
+
+
 def est_of(estimates, track_id):
     return next(e for e in estimates if e.track_id == track_id)
 
@@ -164,8 +171,7 @@ def test_box_association_gives_the_track_to_the_instance_it_overlaps_most():
     car = Body(rng, 1005, 80, (4.0, 1.5, 1.5))
     objects, trk = ObjectMap(), tracker()
     T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 15.0])) for i in range(8)]
-    for i in range(5):
-        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    e = track_alone(trk, objects, car, T_car[:5])
     car_id = e.track_id
     car.inst, car.desc = 1009, rng.integers(0, 256, car.desc.shape).astype(np.uint8)
     other = Body(rng, 1002, 80, (4.0, 1.5, 1.5))
@@ -187,8 +193,7 @@ def test_box_association_ignores_an_instance_that_cannot_take_the_track():
     ped = Body(rng, 2005, 60, (0.6, 1.7, 0.4))
     objects, trk = ObjectMap(), tracker()
     T_ped = [make_pose(np.eye(3), np.array([-2.0 + 0.15 * i, 0.8, 12.0])) for i in range(7)]
-    for i in range(5):
-        (e,) = trk.track(make_frame(i, [(ped, T_ped[i])]), None, objects).estimates
+    e = track_alone(trk, objects, ped, T_ped[:5])
     ped_id = e.track_id
     hidden = Body(rng, 2002, 5, (0.6, 1.7, 0.4))
     hidden.X_b = np.array([[-0.3, -0.85, 0.0], [0.3, -0.85, 0.0], [-0.3, 0.85, 0.0], [0.3, 0.85, 0.0], [0.0, 0.0, 0.0]])
@@ -340,8 +345,7 @@ def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.3 * i, 0.8, 15.0])) for i in range(5)]
     objects, trk = ObjectMap(), tracker("objects.filter=false")
-    for i in range(4):
-        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    e = track_alone(trk, objects, car, T_car[:4])
     tr = objects.tracks[e.track_id]
     tr.last.v_o = np.array([60.0, 0.0, 0.0])  # a wrong velocity: 6 m (~160 px) off in the next frame
     car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
@@ -361,8 +365,7 @@ def test_box_association_registers_the_prediction_on_matched_points(register):
     T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.3 * i, 0.8, 15.0])) for i in range(7)]
     objects = ObjectMap()
     trk = tracker("objects.filter=false", f"objects.register_min_matches={3 if register else 1000}")
-    for i in range(4):
-        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    e = track_alone(trk, objects, car, T_car[:4])
     tr = objects.tracks[e.track_id]
     T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
     tr.last.v_o = tr.last.v_o + np.array([0.0, 0.0, 15.0])  # prediction 1.5 m too far
@@ -442,8 +445,7 @@ def test_predicted_box_follows_an_approaching_object_out_of_the_image():
     car = Body(rng, 1001, 120, (4.0, 1.5, 1.5))
     T_car = [make_pose(np.eye(3), np.array([1.5, 0.5, 14.0 - 2.5 * i])) for i in range(5)]
     objects, trk = ObjectMap(), tracker("objects.filter=false")
-    for i in range(4):
-        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    e = track_alone(trk, objects, car, T_car[:4])
     tr = objects.tracks[e.track_id]
     car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
     frame = make_frame(4, [(car, T_car[4])])
