@@ -86,8 +86,8 @@ class StaticSchur:
 
     def point_steps(self, d_cams: np.ndarray) -> np.ndarray:
         """(P', 3) point increments for (C, 6) camera increments: -H_pp^-1 (g_p + sum H_pc d_c)."""
-        rhs = self.g_p + _sum_by(self.obs_point, np.einsum("mij,mi->mj", self.W, d_cams[self.obs_cam]),
-                                 len(self.points))
+        Wd = np.einsum("mij,mi->mj", self.W, d_cams[self.obs_cam])
+        rhs = self.g_p + np.column_stack([np.bincount(self.obs_point, Wd[:, i], len(self.points)) for i in range(3)])
         return -np.einsum("pij,pj->pi", self.H_pp_inv, rhs)
 
 
@@ -154,12 +154,13 @@ def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) ->
     J, r = lin.J, lin.r
     points, obs_point = np.unique(lin.obs_pt, return_inverse=True)
     n_p = len(points)
-    # normal-equation blocks [[H_cc, W], [W^T, H_pp]] and gradient (g_c, g_p) of each observation, the camera
-    # ones only where the camera is free
-    Jp = np.ascontiguousarray(J[:, :, 6:])
-    JpT = Jp.transpose(0, 2, 1)
-    H_pp = _sum_by(obs_point, JpT @ Jp, n_p)
-    g_p = _sum_by(obs_point, (JpT @ r[:, :, None])[:, :, 0], n_p)
+    # normal-equation blocks [[H_cc, W], [W^T, H_pp]] and gradient (g_c, g_p): the point ones summed entry
+    # by entry (bincount), the camera ones only where the camera is free
+    Jp = J[:, :, 6:]
+    H_pp = np.empty((n_p, 3, 3))
+    for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+        H_pp[:, i, j] = H_pp[:, j, i] = np.bincount(obs_point, np.einsum("mk,mk->m", Jp[:, :, i], Jp[:, :, j]), n_p)
+    g_p = np.column_stack([np.bincount(obs_point, np.einsum("mk,mk->m", Jp[:, :, i], r), n_p) for i in range(3)])
     H_pp_inv = np.linalg.inv(H_pp + damping * np.eye(3))
 
     K = len(free)
@@ -168,22 +169,26 @@ def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) ->
     cam_row = np.full(K, -1, dtype=np.int64)
     cam_row[cams] = np.arange(C)
     on_free = np.flatnonzero(cam_row[lin.obs_kf] >= 0)
-    on_free = on_free[np.argsort(lin.obs_kf[on_free], kind="stable")]  # grouped by camera: the BSR rows below
+    on_free = on_free[np.argsort(lin.obs_kf[on_free], kind="stable")]  # grouped by camera (contiguous rows)
     oc, op = cam_row[lin.obs_kf[on_free]], obs_point[on_free]
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(oc, minlength=C))])
     Jc = J[on_free, :, :6]
-    JcT = Jc.transpose(0, 2, 1)
-    W = JcT @ Jp[on_free]  # (M', 6, 3) H_cp block of each observation
+    W = Jc.transpose(0, 2, 1) @ Jp[on_free]  # (M', 6, 3) H_cp block of each observation
+    # each camera's H_cc and g_c - W H_pp^-1 g_p: one product over its stacked rows
+    Jc_rows, r_rows = Jc.reshape(-1, 6), r[on_free].ravel()
+    Wy = np.einsum("mij,mj->mi", W, np.einsum("pij,pj->pi", H_pp_inv, g_p)[op])
     S = np.zeros((C, 6, C, 6))
-    S[np.arange(C), :, np.arange(C), :] = _sum_by(oc, JcT @ Jc, C)
-    s = _sum_by(oc, (JcT @ r[on_free, :, None])[:, :, 0], C).ravel()
+    s = np.zeros((C, 6))
+    for c in range(C):
+        rows = slice(3 * indptr[c], 3 * indptr[c + 1])
+        S[c, :, c, :] = Jc_rows[rows].T @ Jc_rows[rows]
+        s[c] = Jc_rows[rows].T @ r_rows[rows] - Wy[indptr[c]:indptr[c + 1]].sum(axis=0)
     # reduction sum_p W_p H_pp^-1 W_p^T = U U^T, U = W chol(H_pp^-1): a block-sparse (6C, 3P) matrix whose
     # 6x3 blocks are the observations grouped by camera (scipy's BSR product: ~3x its CSR one)
     U = W @ np.linalg.cholesky(H_pp_inv)[op]
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(oc, minlength=C))])
     Us = sp.bsr_matrix((U, op, indptr), shape=(n, 3 * n_p))
     S = S.reshape(n, n) - (Us @ Us.T).toarray()
-    s = s - _sum_by(oc, (W @ (H_pp_inv[op] @ g_p[op, :, None]))[:, :, 0], C).ravel()
-    return StaticSchur(cams, S, s, points, H_pp_inv, g_p, oc, op, W, lin.cost)
+    return StaticSchur(cams, S, s.ravel(), points, H_pp_inv, g_p, oc, op, W, lin.cost)
 
 
 def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
@@ -195,10 +200,3 @@ def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: n
     camera motion)."""
     lin = linearize_static(T_c_w, X_w, obs_kf, obs_pt, meas, inv_sigma2, camera, min_depth, delta2)
     return reduce_static(lin, free, damping)
-
-
-def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    """(n, ...) sums of the rows of `values` grouped by `index` (one sparse product)."""
-    m = len(index)
-    group = sp.csr_matrix((np.ones(m), (index, np.arange(m))), shape=(n, m))
-    return np.asarray(group @ values.reshape(m, int(np.prod(values.shape[1:])))).reshape((n,) + values.shape[1:])
