@@ -205,10 +205,11 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
     use = np.ones(len(problem.obs_kf), dtype=bool)
     use_o = np.full(len(problem.oobs_f), problem.optimize_objects)
     structure = _object_structure(problem, use_o, cfg.objects.min_observation_points)
-    initial_error = _total_cost(problem, est, structure, camera, cfg)
+    c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+    initial_error = _total_cost(problem, est, structure, camera, cfg, c2)
     schur = None
     if problem.optimize_static and cfg.objects.static_reduced:
-        schur, use = _static_reduction(problem, est, fixed, th, camera, cfg)
+        schur, use = _static_reduction(problem, est, fixed, th, depth, camera, cfg)
         T_w_c0, X_w0 = inverse(est.T_c_w[schur.cams]), est.X_w.copy()  # the linearization point
     timings_ms = {"build": 1e3 * (time.perf_counter() - t_start), "solve": 0.0}
     iterations = 0
@@ -253,7 +254,7 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
         T_c_w=est.T_c_w, X_w=est.X_w, inlier=(c2 <= th) & (depth > cfg.min_depth),
         T_w_o=est.T_w_o, v_o=est.velocity[:, :3].copy(), w_o=est.velocity[:, 3:].copy(), X_o=est.X_o,
         obj_inlier=(c2_o <= th_o) & (depth_o > cfg.min_depth), iterations=iterations,
-        initial_error=initial_error, final_error=_total_cost(problem, est, structure, camera, cfg),
+        initial_error=initial_error, final_error=_total_cost(problem, est, structure, camera, cfg, c2, c2_o),
         timings_ms=timings_ms, n_parameters=n_parameters)
 
 
@@ -420,12 +421,11 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
     return graph, values, keys, ordering
 
 
-def _static_reduction(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, th: np.ndarray,
+def _static_reduction(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, th: np.ndarray, depth: np.ndarray,
                       camera: StereoCamera, cfg: OptimConfig) -> tuple[StaticSchur, np.ndarray]:
-    """The static terms of the joint case reduced to the free cameras at the current estimate, with the
-    Huber kernel (`cfg.objects.static_reduced`); also the (M,) static observations it uses: in front of
-    the camera, of determined points."""
-    _, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
+    """The static terms of the joint case reduced to the free cameras at the current estimate (`depth`: of
+    each static observation there), with the Huber kernel (`cfg.objects.static_reduced`); also the (M,)
+    static observations it uses: in front of the camera, of determined points."""
     use = determined_observations(problem, depth > cfg.min_depth, is_stereo(problem.meas))
     free = ~fixed & (np.bincount(problem.obs_kf[use], minlength=len(fixed)) > 0)
     schur = static_schur(est.T_c_w, free, est.X_w, problem.obs_kf[use], problem.obs_pt[use], problem.meas[use],
@@ -473,14 +473,15 @@ def _object_chi2_depth(problem: ObjectBAProblem, est: _Estimate, camera: StereoC
 
 
 def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, camera: StereoCamera,
-                cfg: OptimConfig) -> float:
-    """Summed Huber cost of eq. (6): reprojection (chi2 thresholds as deltas), eq. (3), eq. (4)."""
+                cfg: OptimConfig, c2: np.ndarray, c2_o: np.ndarray | None = None) -> float:
+    """Summed Huber cost of eq. (6) at `est`: reprojection (chi2 thresholds as deltas), eq. (3), eq. (4).
+    `c2` / `c2_o`: chi2 of the static / object-point observations at `est` (None: computed here)."""
     ocfg = cfg.objects
-    c2, _ = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
     cost = huber_cost(c2, chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)).sum()
     if not problem.optimize_objects:
         return float(cost)
-    c2_o, _ = _object_chi2_depth(problem, est, camera)
+    if c2_o is None:
+        c2_o, _ = _object_chi2_depth(problem, est, camera)
     cost += huber_cost(c2_o, chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo))[st.use].sum()
     for a, b, dt in zip(st.pair_a.tolist(), st.pair_b.tolist(), st.pair_dt.tolist()):
         sigmas = np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3)
