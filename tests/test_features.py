@@ -195,6 +195,16 @@ def test_extraction_deterministic(kitti_left, extractor):
         np.testing.assert_array_equal(getattr(kp, name), getattr(kp2, name))
 
 
+def test_describe_recomputes_the_extracted_orientation_and_descriptors(kitti_left, extractor):
+    """`describe` on the same pyramid gives back `extract`'s angles and descriptors exactly, on every level."""
+    _, pyr, kp = kitti_left
+    idx = np.arange(len(kp))[::3]
+    angle, desc = extractor.describe(pyr, kp, idx)
+    assert len(np.unique(kp.octave[idx])) == extractor.n_levels
+    np.testing.assert_array_equal(angle, kp.angle[idx])
+    np.testing.assert_array_equal(desc, kp.desc[idx])
+
+
 def test_extract_reports_stage_timings(kitti_left, extractor):
     _, pyr, kp = kitti_left
     timing: dict[str, float] = {}

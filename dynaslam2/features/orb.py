@@ -357,6 +357,20 @@ class ORBExtractor:
         m_01 = np.einsum("ij,j->i", patches, self._w_v)
         return (np.degrees(np.arctan2(m_01, m_10)) % 360.0).astype(np.float32)
 
+    def describe(self, pyramid: list[np.ndarray], kp: Keypoints, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(angle, descriptors) of the keypoints `idx` of `kp` computed again on `pyramid` (same geometry,
+        other pixels: e.g. levels whose background is blanked), as `extract` computes them."""
+        angle = np.empty(len(idx), np.float32)
+        desc = np.empty((len(idx), 32), np.uint8)
+        scales = level_scales(pyramid)
+        octave = kp.octave[idx]
+        for lv in np.unique(octave).tolist():
+            sel = np.flatnonzero(octave == lv)
+            xy = np.rint(base_to_level(kp.uv[idx[sel]].astype(np.float64), scales[lv])).astype(np.float32)
+            angle[sel] = self._angles(pyramid[lv], xy)
+            desc[sel] = self._describe(pyramid[lv], [cv2.KeyPoint() for _ in sel], xy, angle[sel])
+        return angle, desc
+
     def _describe(self, img: np.ndarray, kps: list, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """rBRIEF descriptors on the blurred level (OpenCV's ORB) of FAST's own keypoint objects `kps`, moved
         to level coordinates `xy` and given `angle` (no keypoint is built in Python). All keypoints are

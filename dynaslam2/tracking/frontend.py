@@ -65,6 +65,18 @@ class FrameBuilder:
         u_right[idx[found]] = ur[found]
         depth[idx[found]] = z[found]
 
+    def _mask_descriptors(self, kp: Keypoints, pyr_l: list[np.ndarray], instances: np.ndarray,
+                          on_instance: np.ndarray) -> None:
+        """Orientation and descriptors of the keypoints `on_instance` (after stereo matching, which compares
+        the original ones with the right image's) recomputed on the pyramid of the left image with every
+        pixel off the dynamic-class instances set to mid-grey: a keypoint on an object's outline then
+        describes the object's side of it, not the background that slides behind a moving object."""
+        idx = np.flatnonzero(on_instance)
+        if len(idx) == 0:
+            return
+        blanked = np.where(dynamic_mask(instances, 0), pyr_l[0], np.uint8(128))
+        kp.angle[idx], kp.desc[idx] = self.extractor.describe(self.extractor.build_pyramid(blanked), kp, idx)
+
     def _pixels(self, kp: Keypoints) -> tuple[np.ndarray, np.ndarray]:
         """(column, row) of the level-0 pixel nearest to each keypoint."""
         col = np.clip(np.rint(kp.uv[:, 0]).astype(np.int64), 0, self.camera.width - 1)
@@ -133,8 +145,11 @@ class FrameBuilder:
         else:
             instance_id = np.zeros(n, dtype=np.int64)
             class_id = np.zeros(n, dtype=np.int64)
+        if mode == "dynamic" and data.instances is not None and self.config.objects.masked_descriptors:
+            self._mask_descriptors(kp, pyr_l, data.instances, on_dyn & (instance_id > 0)
+                                   & np.isin(class_id, DYNAMIC_CLASS_IDS))
         static = ~on_dyn if mode == "dynamic" else np.ones(n, dtype=bool)
-        timing_ms["features"] = (t1 - t0) * 1e3
+        timing_ms["features"] = (t1 - t0 + time.perf_counter() - t2) * 1e3
         timing_ms["stereo"] = (t2 - t1) * 1e3
         return Frame(
             index=data.index, timestamp=data.timestamp, keypoints=kp,
