@@ -383,6 +383,8 @@ class ObjectsConfig:
     # ms per frame (traffic s0, one thread). Most added corners lie on the object's outline (so do most
     # first-pass ones: the sim's bodies are smoothly textured boxes), where they slide with the background.
     densify_features: int = 0
+    densify_below: int = 30
+    densify_max_level: int = 2
     # Not in the paper: in `dynamic` mode the keypoints on dynamic-class instances get their orientation and
     # ORB descriptor again (after stereo matching) from the left image with every pixel off those instances
     # set to mid-grey, so that a keypoint on an object's outline (most of them: the sim's bodies are
@@ -392,8 +394,6 @@ class ObjectsConfig:
     # object ATE 0.286 -> 0.301 m (single tracks move either way: crossing s0's far car 2 0.39 -> 2.85 m,
     # static s1 0.244 -> 0.163 m over the sequence), mean ego ATE 0.0267 -> 0.0222 m.
     masked_descriptors: bool = True
-    densify_below: int = 30
-    densify_max_level: int = 2
     # New object points farther than this from the median of the instance's points are dropped
     # (keypoints on the mask border that see the background).
     max_point_spread_m: float = 5.0

@@ -22,8 +22,10 @@ DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtyp
 
 def dynamic_mask(instances: np.ndarray, dilation_px: int) -> np.ndarray:
     """HxW bool: pixels of dynamic-class instances, dilated by `dilation_px` (DynaSLAM's mask)."""
-    cls = instance_class_id(instances.astype(np.int64))
-    mask = np.isin(cls, DYNAMIC_CLASS_IDS).astype(np.uint8)
+    cls = instance_class_id(instances)
+    dynamic = np.zeros(int(cls.max(initial=0)) + 1, np.uint8)  # class id -> dynamic (a lookup, not np.isin)
+    dynamic[DYNAMIC_CLASS_IDS[DYNAMIC_CLASS_IDS < len(dynamic)]] = 1
+    mask = dynamic[cls]
     if dilation_px > 0 and mask.any():
         k = 2 * dilation_px + 1
         mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
