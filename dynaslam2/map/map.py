@@ -203,8 +203,7 @@ class Map:
         X = self.points.X_w[pt_ids]
         rays = X[grp] - centers
         rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-12)
-        normal = np.zeros((len(pt_ids), 3))
-        np.add.at(normal, grp, rays)
+        normal = np.column_stack([np.bincount(grp, rays[:, i], len(pt_ids)) for i in range(3)])
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         self.points.normal[pt_ids[has_obs]] = normal[has_obs]
         # Reference keyframe: the one that created the point if it still observes it, else any observer.
