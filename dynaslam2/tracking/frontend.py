@@ -20,16 +20,20 @@ from dynaslam2.map.frame import Frame
 DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
 
 
-def dynamic_mask(instances: np.ndarray, dilation_px: int) -> np.ndarray:
-    """HxW bool: pixels of dynamic-class instances, dilated by `dilation_px` (DynaSLAM's mask)."""
+def dynamic_mask(instances: np.ndarray) -> np.ndarray:
+    """HxW bool: pixels of dynamic-class instances."""
     cls = instance_class_id(instances)
-    dynamic = np.zeros(int(cls.max(initial=0)) + 1, np.uint8)  # class id -> dynamic (a lookup, not np.isin)
-    dynamic[DYNAMIC_CLASS_IDS[DYNAMIC_CLASS_IDS < len(dynamic)]] = 1
-    mask = dynamic[cls]
-    if dilation_px > 0 and mask.any():
-        k = 2 * dilation_px + 1
-        mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
-    return mask.astype(bool)
+    dynamic = np.zeros(int(cls.max(initial=0)) + 1, bool)  # class id -> dynamic (a lookup, not np.isin)
+    dynamic[DYNAMIC_CLASS_IDS[DYNAMIC_CLASS_IDS < len(dynamic)]] = True
+    return dynamic[cls]
+
+
+def dilate_mask(mask: np.ndarray, dilation_px: int) -> np.ndarray:
+    """HxW bool `mask` dilated by `dilation_px` (DynaSLAM's mask of the dynamic instances)."""
+    if dilation_px <= 0 or not mask.any():
+        return mask
+    k = 2 * dilation_px + 1
+    return cv2.dilate(mask.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool)
 
 
 class FrameBuilder:
@@ -67,16 +71,17 @@ class FrameBuilder:
         u_right[idx[found]] = ur[found]
         depth[idx[found]] = z[found]
 
-    def _mask_descriptors(self, kp: Keypoints, pyr_l: list[np.ndarray], instances: np.ndarray,
-                          on_instance: np.ndarray) -> None:
-        """Orientation and descriptors of the keypoints `on_instance` (after stereo matching, which compares
+    def _mask_descriptors(self, kp: Keypoints, pyr_l: list[np.ndarray], objects_px: np.ndarray,
+                          on_objects: np.ndarray) -> None:
+        """Orientation and descriptors of the keypoints `on_objects` (after stereo matching, which compares
         the original ones with the right image's) recomputed on the pyramid of the left image with every
-        pixel off the dynamic-class instances set to mid-grey: a keypoint on an object's outline then
-        describes the object's side of it, not the background that slides behind a moving object."""
-        idx = np.flatnonzero(on_instance)
+        pixel off the dynamic-class instances (`objects_px`) set to mid-grey: a keypoint on an object's
+        outline then describes the object's side of it, not the background that slides behind a moving
+        object."""
+        idx = np.flatnonzero(on_objects)
         if len(idx) == 0:
             return
-        blanked = np.where(dynamic_mask(instances, 0), pyr_l[0], np.uint8(128))
+        blanked = np.where(objects_px, pyr_l[0], np.uint8(128))
         kp.angle[idx], kp.desc[idx] = self.extractor.describe(self.extractor.build_pyramid(blanked), kp, idx)
 
     def _pixels(self, kp: Keypoints) -> tuple[np.ndarray, np.ndarray]:
@@ -85,16 +90,16 @@ class FrameBuilder:
         row = np.clip(np.rint(kp.uv[:, 1]).astype(np.int64), 0, self.camera.height - 1)
         return col, row
 
-    def _densify(self, kp: Keypoints, pyr_l: list[np.ndarray], instances: np.ndarray) -> Keypoints:
+    def _densify(self, kp: Keypoints, pyr_l: list[np.ndarray], instances: np.ndarray,
+                 objects_px: np.ndarray) -> Keypoints:
         """`kp` followed by the keypoints of a second ORB pass (objects.densify_*) restricted to the
         dynamic-class instances that the first pass gave fewer than densify_below keypoints (small or
         weakly textured objects: the grid distribution over the whole image leaves them a handful), on
         levels 0..densify_max_level, away from the first pass's keypoints (their pixel and its 8
-        neighbours)."""
+        neighbours). `objects_px`: `dynamic_mask` of `instances`."""
         col, row = self._pixels(kp)
-        dyn_inst = dynamic_mask(instances, 0)
-        ids, counts = np.unique(instances[row, col][dyn_inst[row, col]], return_counts=True)
-        allowed = dyn_inst & ~np.isin(instances, ids[counts >= self.config.objects.densify_below])
+        ids, counts = np.unique(instances[row, col][objects_px[row, col]], return_counts=True)
+        allowed = objects_px & ~np.isin(instances, ids[counts >= self.config.objects.densify_below])
         if not allowed.any():
             return kp
         first = np.zeros(allowed.shape, np.uint8)
@@ -109,9 +114,10 @@ class FrameBuilder:
         self._check(data)
         mode = self.config.mode
         t0 = time.perf_counter()
-        dyn = None
+        objects_px = dyn = None
         if data.instances is not None and mode in ("masked", "dynamic"):
-            dyn = dynamic_mask(data.instances, self.config.tracking.mask_dilation_px)
+            objects_px = dynamic_mask(data.instances)
+            dyn = dilate_mask(objects_px, self.config.tracking.mask_dilation_px)
         pyr_l = self.extractor.build_pyramid(to_gray(data.left))
         # masked: features on dynamic instances are never extracted, the budget goes to the rest (DynaSLAM).
         mask = ~dyn if (mode == "masked" and dyn is not None) else None
@@ -123,7 +129,7 @@ class FrameBuilder:
             kp, kp_r = self.extractor.extract_pair(pyr_l, pyr_r, mask, self.n_features_right)
         n_first = len(kp)
         if mode == "dynamic" and data.instances is not None and self.config.objects.densify_features > 0:
-            kp = self._densify(kp, pyr_l, data.instances)
+            kp = self._densify(kp, pyr_l, data.instances, objects_px)
         t1 = time.perf_counter()
         n = len(kp)
         col, row = self._pixels(kp)
@@ -148,8 +154,7 @@ class FrameBuilder:
             instance_id = np.zeros(n, dtype=np.int64)
             class_id = np.zeros(n, dtype=np.int64)
         if mode == "dynamic" and data.instances is not None and self.config.objects.masked_descriptors:
-            self._mask_descriptors(kp, pyr_l, data.instances, on_dyn & (instance_id > 0)
-                                   & np.isin(class_id, DYNAMIC_CLASS_IDS))
+            self._mask_descriptors(kp, pyr_l, objects_px, objects_px[row, col])
         static = ~on_dyn if mode == "dynamic" else np.ones(n, dtype=bool)
         timing_ms["features"] = (t1 - t0 + time.perf_counter() - t2) * 1e3
         timing_ms["stereo"] = (t2 - t1) * 1e3
