@@ -51,11 +51,13 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     all_ids = list(free_ids) + list(fixed_ids)
     if not all_ids or not tracks:
         return {}
-    kf_index = {k: i for i, k in enumerate(all_ids)}
+    window_row = np.full(max(all_ids) + 1, -1, dtype=np.int64)  # keyframe id -> row in the window
+    window_row[all_ids] = np.arange(len(all_ids))
+    in_window = set(all_ids)
     # Object observations in the window and their points (each object's points once).
     obs_list: list[tuple[int, ObjectObservation]] = []
     for k, tr in enumerate(tracks):
-        obs_list += [(k, o) for o in tr.observations if o.kf_id in kf_index and o.timestamp >= kf.timestamp - tail]
+        obs_list += [(k, o) for o in tr.observations if o.kf_id in in_window and o.timestamp >= kf.timestamp - tail]
     if not obs_list:
         return {}
     P = objects.points
@@ -86,14 +88,12 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         inv_sigma2[m] = mapper.inv_level_sigma2[map_.keyframes[k].keypoints.octave[obs_kp[m]]]
     pt_index = np.full(map_.points.size, -1, dtype=np.int64)
     pt_index[pts] = np.arange(len(pts))
-    window_row = np.full(max(all_ids) + 1, -1, dtype=np.int64)  # keyframe id -> row in the window
-    window_row[all_ids] = np.arange(len(all_ids))
     problem = ObjectBAProblem(
         T_c_w=np.stack([map_.keyframes[k].T_c_w for k in all_ids]),
         fixed=np.array([False] * len(free_ids) + [True] * len(fixed_ids)),
         X_w=map_.points.X_w[pts].copy(), obs_kf=window_row[obs_kf],
         obs_pt=pt_index[obs_pt], meas=meas, inv_sigma2=inv_sigma2,
-        obj_frames=np.array([kf_index[o.kf_id] for _, o in obs_list]),
+        obj_frames=window_row[[o.kf_id for _, o in obs_list]],
         obj_id=np.array([k for k, _ in obs_list]),
         T_w_o=np.stack([o.T_w_o for _, o in obs_list]),
         v_o=np.stack([o.v_o for _, o in obs_list]), w_o=np.stack([o.w_o for _, o in obs_list]),
