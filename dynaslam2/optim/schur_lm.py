@@ -14,13 +14,13 @@ own (cost of the weighted residuals minus the model's cost at the step), as in C
 A stated replacement of gtsam for the static local BA (optim.local_ba_solver; gtsam's stays as the
 reference, tests/test_schur_lm.py: the same steps to 1e-9 m). Replaying the 59 static local BA windows of
 sim traffic s0 640x480 (150 frames; median 3311 points, 18.4k observations; `python
-benchmarks/bench_ba.py --slam-windows SEQ --slam-frames 150 --compare optim.local_ba_solver=gtsam`): median
-89 ms CPU against gtsam's 194 with its factor cache (0.46x), the same distance from the converged windows
-(0.17 cm) and the same cost, with OPENBLAS_NUM_THREADS=1 (with OpenBLAS's default threads the process CPU
-time also counts its spinning threads: 151 against 169 ms). KITTI 06 clip, static mode end to end: local
-BA 36 against 62 ms per keyframe (wall), the same ATE. Of a call (cProfile on those windows), the point
-elimination and the reduced camera system are ~2/3 (scipy's block-sparse product ~1/4 of that), the
-linearization ~1/8, the cost and chi2 evaluations ~1/6.
+benchmarks/bench_ba.py --slam-windows SEQ --slam-frames 150 --repeats 3 --compare optim.local_ba_solver=gtsam`,
+OPENBLAS_NUM_THREADS=1; with OpenBLAS's default threads the process CPU time also counts its spinning
+threads): median 46 ms CPU against gtsam's 99 with its factor cache (0.46x; 89 against 194 on a slower
+day), the same distance from the converged windows (0.17 cm) and the same cost. KITTI 06 clip, static
+mode end to end: local BA 36 against 62 ms per keyframe (wall), the same ATE. Of a call (cProfile on
+those windows), the point elimination and the reduced camera system are ~3/5 (scipy's block-sparse
+product ~1/3 of that), the linearization ~1/7, the cost and chi2 evaluations ~1/6.
 """
 
 from __future__ import annotations
