@@ -20,7 +20,7 @@ threads): median 46 ms CPU against gtsam's 99 with its factor cache (0.46x; 89 a
 day), the same distance from the converged windows (0.17 cm) and the same cost. KITTI 06 clip, static
 mode end to end: local BA 36 against 62 ms per keyframe (wall), the same ATE. Of a call (cProfile on
 those windows), the point elimination and the reduced camera system are ~3/5 (scipy's block-sparse
-product ~1/3 of that), the linearization ~1/7, the cost and chi2 evaluations ~1/6.
+product ~1/3 of that), the linearization and the cost and chi2 evaluations ~1/6 each.
 """
 
 from __future__ import annotations
