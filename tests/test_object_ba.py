@@ -27,7 +27,7 @@ from dynaslam2.optim.object_pose import (
     optimize_object_pose,
     predict_object_pose,
 )
-from dynaslam2.optim.reprojection import huber_cost
+from dynaslam2.optim.reprojection import chi2_depth, huber_cost
 from dynaslam2.optim.synthetic import kitti_like_camera, observe, perturb_poses
 from dynaslam2.optim.synthetic_objects import box_points, make_object_window
 
@@ -198,7 +198,8 @@ def projection_case(seed: int, n: int = 12):
     return T_w_c, T_w_o, X_o, obs
 
 
-def test_direct_projection_factor_jacobians():
+@pytest.mark.parametrize("disparity_weight", [None, 3.0])
+def test_direct_projection_factor_jacobians(disparity_weight):
     """Eq. (2) on (T_w_c, T_w_o, x_o): analytic Jacobians against numerical differentiation."""
     T_w_c, T_w_o, X_o, obs = projection_case(2)
     n = len(X_o)
@@ -207,7 +208,8 @@ def test_direct_projection_factor_jacobians():
     values.insert(1, gtsam.Pose3(T_w_o))
     for j in range(n):
         values.insertPoint3(2 + j, X_o[j] + 0.01)
-    factor = direct_projection_factor(0, 1, np.arange(2, 2 + n), obs.meas, obs.inv_sigma2, CAMERA, None, None)
+    factor = direct_projection_factor(0, 1, np.arange(2, 2 + n), obs.meas, obs.inv_sigma2, CAMERA, None, None,
+                                      disparity_weight)
     A, b = factor.linearize(values).jacobian()
     J_num = numerical_jacobian(factor, values, {0: "pose", 1: "pose"} | {2 + j: "point" for j in range(n)})
     assert np.allclose(b, -factor.unwhitenedError(values))
@@ -215,9 +217,10 @@ def test_direct_projection_factor_jacobians():
 
 
 @pytest.mark.parametrize("robust", [False, True])
-def test_q_parametrization_has_the_direct_objective(robust):
+@pytest.mark.parametrize("disparity_weight", [None, 3.0])
+def test_q_parametrization_has_the_direct_objective(robust, disparity_weight):
     """Eq. (2) through Q = T_w_o^-1 T_w_c with gtsam's built-in stereo/projection factors has exactly the cost
-    of the direct (T_w_c, T_w_o, x_o) factor, with and without the Huber kernels."""
+    of the direct (T_w_c, T_w_o, x_o) factor, with and without the Huber kernels and the disparity model."""
     T_w_c, T_w_o, X_o, obs = projection_case(3)
     n = len(X_o)
     deltas = (np.sqrt(5.991), np.sqrt(7.815)) if robust else (None, None)
@@ -230,12 +233,41 @@ def test_q_parametrization_has_the_direct_objective(robust):
         direct_values.insertPoint3(2 + j, X_o[j])
         q_values.insertPoint3(2 + j, X_o[j])
     direct = gtsam.NonlinearFactorGraph()
-    direct.push_back(direct_projection_factor(0, 1, np.arange(2, 2 + n), obs.meas, obs.inv_sigma2, CAMERA, *deltas))
+    direct.push_back(direct_projection_factor(0, 1, np.arange(2, 2 + n), obs.meas, obs.inv_sigma2, CAMERA, *deltas,
+                                              disparity_weight))
     builtin = gtsam.NonlinearFactorGraph()
     add_stereo_factors(builtin, np.ones(n, np.int64), np.arange(2, 2 + n), obs.meas, obs.inv_sigma2,
-                                  CAMERA, *deltas)
+                       CAMERA, *deltas, disparity_weight=disparity_weight)
     assert direct.error(direct_values) > 100.0  # the outliers weigh
     assert np.isclose(direct.error(direct_values), builtin.error(q_values), rtol=1e-9)
+
+
+@pytest.mark.parametrize("disparity_weight", [None, 3.0])
+def test_stereo_factor_cost_is_the_chi2_of_its_residual_model(disparity_weight):
+    """A GenericStereoFactor3D with `huber_stereo_noise` (no kernel) costs half the chi2 that the BA's inlier
+    test computes (`chi2_depth`): [u, v, u_right] at sigma, or [u, v, disparity] with the disparity at sigma / k
+    (the covariance correlating u and u_right). The disparity model weighs a disparity error k^2 / 2 times more."""
+    rng = np.random.default_rng(5)
+    n = 40
+    X_c = np.column_stack([rng.uniform(-4, 4, n), rng.uniform(-2, 2, n), rng.uniform(4, 30, n)])
+    obs = observe(rng, CAMERA, X_c, np.ones(n, bool))
+    values = gtsam.Values()
+    values.insert(0, gtsam.Pose3())
+    graph = gtsam.NonlinearFactorGraph()
+    for j in range(n):
+        values.insertPoint3(1 + j, X_c[j])
+    add_stereo_factors(graph, np.zeros(n, np.int64), np.arange(1, 1 + n), obs.meas, obs.inv_sigma2, CAMERA, None,
+                       None, disparity_weight=disparity_weight)
+    c2, _ = chi2_depth(np.eye(4)[None], np.zeros(n, np.int64), X_c, np.arange(n), obs.meas, obs.inv_sigma2, CAMERA,
+                       disparity_weight)
+    point = [graph.at(j).keys()[1] - 1 for j in range(n)]
+    assert np.allclose([graph.at(j).error(values) for j in range(n)], 0.5 * c2[point], rtol=1e-9)
+    # a disparity error alone (u and u_right moved apart by 1 px at level 0)
+    meas = CAMERA.project_stereo(X_c[:1]) + np.array([[0.0, 0.0, 1.0]])
+    one = gtsam.NonlinearFactorGraph()
+    add_stereo_factors(one, np.zeros(1, np.int64), np.ones(1, np.int64), meas, np.ones(1), CAMERA, None, None,
+                       disparity_weight=disparity_weight)
+    assert np.isclose(one.error(values), 0.5 if disparity_weight is None else 0.5 * disparity_weight**2)
 
 
 # The joint case with every static term relinearized, for synthetic windows that start far from their optimum

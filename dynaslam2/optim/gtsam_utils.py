@@ -33,9 +33,17 @@ def mono_calibration(camera: StereoCamera) -> gtsam.Cal3_S2:
     return gtsam.Cal3_S2(camera.fx, camera.fy, 0.0, camera.cx, camera.cy)
 
 
-def huber_stereo_noise(inv_sigma2: float, delta: float | None) -> gtsam.noiseModel.Base:
-    """Isotropic 3-dof noise, sigma = 1/sqrt(inv_sigma2), wrapped in a Huber kernel (None: no kernel)."""
-    return _robust(gtsam.noiseModel.Isotropic.Sigma(3, 1.0 / np.sqrt(inv_sigma2)), delta)
+def huber_stereo_noise(inv_sigma2: float, delta: float | None,
+                       disparity_weight: float | None = None) -> gtsam.noiseModel.Base:
+    """3-dof noise of a `StereoPoint2` (u_L, u_R, v), sigma = 1/sqrt(inv_sigma2), wrapped in a Huber kernel
+    (None: no kernel). Isotropic, or with `disparity_weight` k: u_R = u_L - d with the disparity d at
+    sigma / k, i.e. the whitened residual [u, v, k disparity] of `reprojection.disparity_residuals`
+    (covariance [[s2, s2, 0], [s2, s2 (1 + 1/k^2), 0], [0, 0, s2]])."""
+    s2 = 1.0 / inv_sigma2
+    if disparity_weight is None:
+        return _robust(gtsam.noiseModel.Isotropic.Sigma(3, np.sqrt(s2)), delta)
+    cov = s2 * np.array([[1.0, 1.0, 0.0], [1.0, 1.0 + disparity_weight**-2, 0.0], [0.0, 0.0, 1.0]])
+    return _robust(gtsam.noiseModel.Gaussian.Covariance(cov), delta)
 
 
 def _robust(model: gtsam.noiseModel.Base, delta: float | None) -> gtsam.noiseModel.Base:
@@ -158,9 +166,10 @@ def stereo_factors(
     inv_sigma2: np.ndarray,
     camera: StereoCamera,
     huber_delta: float | None,
+    disparity_weight: float | None = None,
 ) -> np.ndarray:
     """(n,) object array of built-in `GenericStereoFactor3D`s (3-dof, Huber on the 3-vector as ORB-SLAM2's
-    stereo edge), one per stereo observation `[u, v, u_R]`.
+    stereo edge), one per stereo observation `[u, v, u_R]` (noise: `huber_stereo_noise`).
 
     gtsam has no batch constructor for stereo factors: they are made in a Python loop (~3 us each here,
     ~2x the C++-built pairs of `add_stereo_projection_factors`), which the smaller graph repays (one
@@ -169,7 +178,7 @@ def stereo_factors(
     """
     calib = stereo_calibration(camera)
     level_values, level = np.unique(inv_sigma2, return_inverse=True)
-    models = [huber_stereo_noise(lv, huber_delta) for lv in level_values.tolist()]
+    models = [huber_stereo_noise(lv, huber_delta, disparity_weight) for lv in level_values.tolist()]
     factor, stereo_point = gtsam.GenericStereoFactor3D, gtsam.StereoPoint2
     out = np.empty(len(meas), dtype=object)
     for i, ((u, v, u_r), lvl, pose_key, point_key) in enumerate(zip(meas.tolist(), level.tolist(),
@@ -233,17 +242,21 @@ def add_stereo_factors(
     huber_delta_mono: float | None,
     huber_delta_stereo: float | None,
     cache: StereoFactorCache | None = None,
+    disparity_weight: float | None = None,
 ) -> None:
     """Add one reprojection term per observation: a `GenericStereoFactor3D` per stereo observation
-    (`stereo_factors`, or `cache.factors`), a pinhole projection factor per monocular one (built in
-    C++ by `add_stereo_projection_factors`). Factors are added with `graph.add` (one pybind overload,
-    0.2 us), not `push_back` (two overloads, the graph one tried first: 2 us per factor)."""
+    (`stereo_factors`, or `cache.factors`; `disparity_weight`: see `huber_stereo_noise`), a pinhole
+    projection factor per monocular one (built in C++ by `add_stereo_projection_factors`). Factors are
+    added with `graph.add` (one pybind overload, 0.2 us), not `push_back` (two overloads, the graph one
+    tried first: 2 us per factor)."""
     stereo = meas[:, 2] >= 0
     mono = ~stereo
     add_stereo_projection_factors(graph, pose_keys[mono], point_keys[mono], meas[mono], inv_sigma2[mono], camera,
                                   huber_delta_mono, None)
-    make = stereo_factors if cache is None else cache.factors
+    if cache is not None and disparity_weight is not None:
+        raise ValueError("add_stereo_factors: the factor cache holds isotropic factors only")
+    stereo_args = (pose_keys[stereo], point_keys[stereo], meas[stereo], inv_sigma2[stereo], camera, huber_delta_stereo)
+    factors = (stereo_factors(*stereo_args, disparity_weight) if cache is None else cache.factors(*stereo_args))
     add = graph.add
-    for factor in make(pose_keys[stereo], point_keys[stereo], meas[stereo], inv_sigma2[stereo], camera,
-                       huber_delta_stereo):
+    for factor in factors:
         add(factor)

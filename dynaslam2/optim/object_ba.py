@@ -15,7 +15,8 @@ Object pose parametrization (`cfg.objects.parametrization`):
 - "direct": T_w_o is the variable and eq. (2) a Python factor per object observation on
   (T_w_c, T_w_o, x_o) (object_factors.direct_projection_factor): the reference formulation.
 
-Terms: eq. (1) static reprojection, eq. (2) object reprojection (sigma from the pyramid level),
+Terms: eq. (1) static reprojection, eq. (2) object reprojection (sigma from the pyramid level; a stereo
+observation's disparity at sigma / `cfg.objects.disparity_weight`, as the object pose-only optimization's),
 eq. (3) velocity smoothness (built-in BetweenFactorVector, sigmas sigma_*_acc * dt), eq. (4)-(5)
 velocity/pose/point coupling (object_factors.motion_factor_object: one factor per object, 12 rows per
 frame pair; `motion_factor` per frame pair as reference, sigma sigma_motion_xyz * dt). Huber on
@@ -222,7 +223,7 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
                 c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
                 use = (c2 <= th) & (depth > cfg.min_depth)
             if problem.optimize_objects:
-                c2_o, depth_o = _object_chi2_depth(problem, est, camera)
+                c2_o, depth_o = _object_chi2_depth(problem, est, camera, cfg)
                 use_o = (c2_o <= th_o) & (depth_o > cfg.min_depth)
             structure = _object_structure(problem, use_o, cfg.objects.min_observation_points)
         if n_iter == 0:
@@ -249,7 +250,7 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
         est.X_w[schur.points] = X_w0[schur.points] + schur.point_steps(d_cams)
     est.T_c_w[fixed] = problem.T_c_w[fixed]
     c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
-    c2_o, depth_o = _object_chi2_depth(problem, est, camera)
+    c2_o, depth_o = _object_chi2_depth(problem, est, camera, cfg)
     return ObjectBAResult(
         T_c_w=est.T_c_w, X_w=est.X_w, inlier=(c2 <= th) & (depth > cfg.min_depth),
         T_w_o=est.T_w_o, v_o=est.velocity[:, :3].copy(), w_o=est.velocity[:, 3:].copy(), X_o=est.X_o,
@@ -264,7 +265,7 @@ def _camera_weak_only(problem: ObjectBAProblem, est: _Estimate, camera: StereoCa
     static = local_bundle_adjustment(BAProblem(problem.T_c_w, problem.fixed, problem.X_w, problem.obs_kf,
                                                problem.obs_pt, problem.meas, problem.inv_sigma2), camera, cfg)
     est.T_c_w, est.X_w = static.T_c_w, static.X_w
-    c2_o, depth_o = _object_chi2_depth(problem, est, camera)
+    c2_o, depth_o = _object_chi2_depth(problem, est, camera, cfg)
     th_o = chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo)
     return ObjectBAResult(
         T_c_w=est.T_c_w, X_w=est.X_w, inlier=static.inlier, T_w_o=est.T_w_o, v_o=est.velocity[:, :3].copy(),
@@ -314,6 +315,7 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
     instead of static point variables and eq. (1) factors."""
     ocfg = cfg.objects
     direct = ocfg.parametrization == "direct"
+    disparity_weight = _disparity_weight(cfg)
     delta_mono = np.sqrt(cfg.chi2_mono) if robust else None
     delta_stereo = np.sqrt(cfg.chi2_stereo) if robust else None
     # Huber on the whole 3-dof stereo residual needs the Python-built stereo factors; without kernel the
@@ -375,10 +377,16 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
             sel = st.use & (problem.oobs_f == f)
             graph.push_back(direct_projection_factor(
                 int(cam_key[problem.obj_frames[f]]), int(obs_key[f]), opt_key[problem.oobs_pt[sel]],
-                problem.oobs_meas[sel], problem.oobs_inv_sigma2[sel], camera, delta_mono, delta_stereo))
+                problem.oobs_meas[sel], problem.oobs_inv_sigma2[sel], camera, delta_mono, delta_stereo,
+                disparity_weight))
     elif st.use.any():
-        add_reprojection(graph, obs_key[problem.oobs_f[st.use]], opt_key[problem.oobs_pt[st.use]],
-                         problem.oobs_meas[st.use], problem.oobs_inv_sigma2[st.use], camera, delta_mono, delta_stereo)
+        # (both stages as GenericStereoFactor3D with the disparity model: the C++-built pairs cannot correlate)
+        obj_args = (graph, obs_key[problem.oobs_f[st.use]], opt_key[problem.oobs_pt[st.use]], problem.oobs_meas[st.use],
+                    problem.oobs_inv_sigma2[st.use], camera, delta_mono, delta_stereo)
+        if disparity_weight is None:
+            add_reprojection(*obj_args)
+        else:
+            add_stereo_factors(*obj_args, disparity_weight=disparity_weight)
     # gauge of each object frame
     anchored = st.obs & fixed[problem.obj_frames]
     for k in np.unique(problem.obj_id[obs_idx]).tolist():
@@ -465,11 +473,17 @@ def _read_back(values: gtsam.Values, keys: dict, problem: ObjectBAProblem,
         est.velocity[moving_idx] = np.array([values.atVector(k) for k in vel_keys.tolist()])
 
 
-def _object_chi2_depth(problem: ObjectBAProblem, est: _Estimate, camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
+def _disparity_weight(cfg: OptimConfig) -> float | None:
+    """eq. (2)'s disparity weight (`cfg.objects.disparity_weight`; None: isotropic [u, v, u_right])."""
+    return cfg.objects.disparity_weight or None
+
+
+def _object_chi2_depth(problem: ObjectBAProblem, est: _Estimate, camera: StereoCamera,
+                       cfg: OptimConfig) -> tuple[np.ndarray, np.ndarray]:
     """(M2,) chi2 and depth of every object-point observation (eq. 2)."""
     T_c_o = est.T_c_w[problem.obj_frames] @ est.T_w_o
     return chi2_depth(T_c_o, problem.oobs_f, est.X_o, problem.oobs_pt, problem.oobs_meas, problem.oobs_inv_sigma2,
-                      camera)
+                      camera, _disparity_weight(cfg))
 
 
 def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, camera: StereoCamera,
@@ -481,7 +495,7 @@ def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, 
     if not problem.optimize_objects:
         return float(cost)
     if c2_o is None:
-        c2_o, _ = _object_chi2_depth(problem, est, camera)
+        c2_o, _ = _object_chi2_depth(problem, est, camera, cfg)
     cost += huber_cost(c2_o, chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo))[st.use].sum()
     for a, b, dt in zip(st.pair_a.tolist(), st.pair_b.tolist(), st.pair_dt.tolist()):
         sigmas = np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3)

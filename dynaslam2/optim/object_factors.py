@@ -257,13 +257,15 @@ def direct_projection_factor(
     camera: StereoCamera,
     huber_delta_mono: float | None,
     huber_delta_stereo: float | None,
+    disparity_weight: float | None = None,
 ) -> gtsam.CustomFactor:
     """Eq. (2) on (T_w_c, T_w_o, x_o) for the points of one object seen by one camera: u - pi(T_c_w T_w_o x_o).
 
     The reference formulation that the Q = T_o_c parametrization replaces, with the same objective as
     `add_stereo_factors` (GenericStereoFactor3D / pinhole projection factors): residual (u, v, u_R)
-    of a stereo observation, (u, v) of a monocular one, sigma s, Huber on each observation's residual
-    (delta of its dof). A point behind the camera gives gtsam's constant error 2 fx, zero Jacobian.
+    of a stereo observation, or (u, v, k disparity) with `disparity_weight` k, (u, v) of a monocular
+    one, sigma s, Huber on each observation's residual (delta of its dof). A point behind the camera
+    gives gtsam's constant error 2 fx, zero Jacobian.
     """
     n = len(point_keys)
     stereo = meas[:, 2] >= 0
@@ -288,6 +290,8 @@ def direct_projection_factor(
         pred = np.stack([u, fy * y * inv_z + cy, u - bf * inv_z], -1)
         r = np.where(front[:, None], pred - meas, 2.0 * fx) * sqrt_info[:, None]
         r[~stereo, 2] = 0.0
+        if disparity_weight is not None:
+            r[:, 2] = np.where(stereo, disparity_weight * (r[:, 0] - r[:, 2]), 0.0)
         scale = huber_scale(np.einsum("ij,ij->i", r, r), delta2, H is not None)
         if H is not None:
             # d(u, v, u_R) / d X_c, whitened and weighted, zero behind the camera
@@ -297,6 +301,8 @@ def direct_projection_factor(
             D[:, 2, 2] = -(fx * x - bf) * inv_z**2
             D[:, 1, 1] = fy * inv_z
             D[:, 1, 2] = -fy * y * inv_z**2
+            if disparity_weight is not None:
+                D[:, 2] = disparity_weight * (D[:, 0] - D[:, 2])  # (mono rows: not in `rows`)
             D *= (scale * sqrt_info * front)[:, None, None]
             J_cam = np.concatenate([D @ hat(X_c), -D], -1)  # X_c' = X_c + [X_c]x omega - nu
             D_o = D @ R_c_o

@@ -42,12 +42,17 @@ def chi2(e: np.ndarray, inv_sigma2: np.ndarray) -> np.ndarray:
 
 
 def chi2_depth(T_c_x: np.ndarray, obs_frame: np.ndarray, X: np.ndarray, obs_pt: np.ndarray, meas: np.ndarray,
-               inv_sigma2: np.ndarray, camera: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
+               inv_sigma2: np.ndarray, camera: StereoCamera,
+               disparity_weight: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(M,) chi2 and depth of observations: point `X[obs_pt]` (in frame x: world, or an object's frame)
-    seen by the camera `T_c_x[obs_frame]`."""
+    seen by the camera `T_c_x[obs_frame]`; residuals `[u, v, u_right]`, or `[u, v, disparity]` with the
+    disparity at sigma / `disparity_weight`."""
     T = T_c_x[obs_frame]
     X_c = np.einsum("mij,mj->mi", T[:, :3, :3], X[obs_pt]) + T[:, :3, 3]
-    return chi2(residuals(camera, X_c, meas), inv_sigma2), X_c[:, 2]
+    e = residuals(camera, X_c, meas)
+    if disparity_weight is not None:
+        e = disparity_residuals(e, meas, disparity_weight)
+    return chi2(e, inv_sigma2), X_c[:, 2]
 
 
 def chi2_thresholds(meas: np.ndarray, chi2_mono: float, chi2_stereo: float) -> np.ndarray:

@@ -61,15 +61,20 @@ def observe(
     n_levels: int = 8,
     scale_factor: float = 1.2,
     noise_scale: float = 1.0,
+    disparity_weight: float | None = None,
 ) -> SyntheticObservations:
     """Measure camera-frame points `[u, v, u_right]` with Gaussian pixel noise of sigma
-    `noise_scale * scale_factor**level` (the level drawn as ORB's per-level feature counts);
-    u_right=-1: mono."""
+    `noise_scale * scale_factor**level` (the level drawn as ORB's per-level feature counts), independent
+    on each coordinate, or with `disparity_weight` k: u_right = u - disparity, u's noise shared and the
+    disparity's sigma / k (a stereo match's sub-pixel disparity); u_right=-1: mono."""
     n = len(X_c)
     level_p = scale_factor ** (-2.0 * np.arange(n_levels))
     level = rng.choice(n_levels, n, p=level_p / level_p.sum())
     sigma = scale_factor**level
-    meas = camera.project_stereo(X_c) + rng.normal(0, noise_scale, (n, 3)) * sigma[:, None]
+    noise = rng.normal(0, noise_scale, (n, 3)) * sigma[:, None]
+    if disparity_weight is not None:
+        noise[:, 2] = noise[:, 0] - noise[:, 2] / disparity_weight
+    meas = camera.project_stereo(X_c) + noise
     outlier = rng.random(n) < outlier_fraction
     n_out = int(outlier.sum())
     bad = rng.uniform(25.0, 60.0, (n_out, 2)) * rng.choice([-1.0, 1.0], (n_out, 2))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dynaslam2.config import ObjectOptimConfig
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, make_pose, se3_exp
 from dynaslam2.optim.object_ba import ObjectBAProblem
@@ -60,10 +61,13 @@ def make_object_window(
     object_sigma: tuple[float, float] = (0.1, 0.02),
     velocity_sigma: tuple[float, float] = (0.5, 0.05),
     point_sigma: float = 0.05,
+    object_disparity_weight: float | None = ObjectOptimConfig().disparity_weight or None,
 ) -> ObjectWindow:
     """Keyframes at jittered times over `duration`, the first `n_fixed` fixed (and exact); objects in
     front of the first camera at `object_depth`, each seen at every keyframe where it is in view. Initial values:
-    perturbed cameras and object poses at the free keyframes, velocities and points."""
+    perturbed cameras and object poses at the free keyframes, velocities and points. The static observations'
+    noise is isotropic (the static BA's model), the object observations' that of eq. (2)'s default
+    disparity model (`synthetic.observe`'s `disparity_weight`)."""
     times = np.linspace(0.0, duration, n_keyframes) + np.concatenate([[0.0], rng.uniform(-0.3, 0.3, n_keyframes - 1)]) \
         * duration / n_keyframes
     twist = np.zeros((n_keyframes, 6))
@@ -110,7 +114,7 @@ def make_object_window(
     vis[vis] = camera.in_image(camera.project(X_c[vis]))
     oobs_f, oobs_pt, X_c = oobs_f[vis], oobs_pt[vis], X_c[vis]
     object_obs = observe(rng, camera, X_c, X_c[:, 2] < 40 * camera.baseline, outlier_fraction,
-                         noise_scale=noise_scale)
+                         noise_scale=noise_scale, disparity_weight=object_disparity_weight)
     seen = np.bincount(oobs_f, minlength=len(obj_id)) > 0
     if not seen.all():  # drop object observations with no visible point (and renumber)
         new_index = np.cumsum(seen) - 1
