@@ -459,3 +459,37 @@ def test_predicted_box_follows_an_approaching_object_out_of_the_image():
     assert box_iou(box[None], truth[None])[0, 0] > 0.9 > 0.7 > box_iou(last[None], truth[None])[0, 0]
     (e4,) = trk.track(frame, None, objects).estimates
     assert e4.track_id == e.track_id
+
+
+def test_ba_write_back_keeps_each_object_frame_on_the_body():
+    """After the BA with objects, each object's points keep their mean position in the object frame: the
+    frame is translated back by the BA's common shift, the world points stay, and the constant-velocity
+    prediction (eq. 5) of every point is the BA's to first order (the linear velocity corrected)."""
+    from dynaslam2.mapping.objects import keep_object_origins
+    from dynaslam2.optim.object_pose import predict_object_pose
+
+    rng = np.random.default_rng(3)
+    pt_obj = np.repeat([0, 1], [30, 12])
+    X_before = rng.normal(0, 1.0, (42, 3))
+    shift = np.array([[0.3, -0.1, 0.4], [-0.2, 0.05, 0.25]])  # the BA's common shift of each object's points
+    X_ba = X_before + shift[pt_obj] + rng.normal(0, 0.01, (42, 3))
+    obj_id = np.array([0, 0, 0, 1, 1])
+    T_ba = np.stack([make_pose(so3_exp(rng.normal(0, 0.5, 3)), rng.normal(0, 5, 3)) for _ in obj_id])
+    v, w = rng.normal(0, 5, (5, 3)), rng.normal(0, 0.5, (5, 3))
+    X_o, T_w_o, v_o = keep_object_origins(X_before, X_ba, pt_obj, T_ba, v, w, obj_id)
+    for k in (0, 1):
+        assert np.allclose(X_o[pt_obj == k].mean(axis=0), X_before[pt_obj == k].mean(axis=0))
+    dt = 0.1
+    for f, k in enumerate(obj_id.tolist()):
+        mine = pt_obj == k
+        world = X_ba[mine] @ T_ba[f][:3, :3].T + T_ba[f][:3, 3]
+        assert np.allclose(X_o[mine] @ T_w_o[f][:3, :3].T + T_w_o[f][:3, 3], world)
+        P_ba = predict_object_pose(T_ba[f], v[f], w[f], dt)
+        expected = X_ba[mine] @ P_ba[:3, :3].T + P_ba[:3, 3]
+        errors = []
+        for v_f in (v_o[f], v[f]):  # corrected, and the BA's velocity as it was
+            P = predict_object_pose(T_w_o[f], v_f, w[f], dt)
+            errors.append(np.abs(X_o[mine] @ P[:3, :3].T + P[:3, 3] - expected).max())
+        d = np.linalg.norm(shift[k])
+        assert errors[0] < dt**2 * np.linalg.norm(w[f]) ** 2 * d  # second order in dt
+        assert errors[1] > 5 * errors[0]  # without the correction, first order (dt |w x d|)

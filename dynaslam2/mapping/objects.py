@@ -36,6 +36,29 @@ def _static_window(kf: KeyFrame, map_: Map, config: SlamConfig) -> tuple[list[in
     return local, fixed, pts
 
 
+def keep_object_origins(X_o_before: np.ndarray, X_o: np.ndarray, pt_obj: np.ndarray, T_w_o: np.ndarray,
+                        v_o: np.ndarray, w_o: np.ndarray, obj_id: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The BA's object points `X_o` (object `pt_obj`), poses `T_w_o` and linear velocities `v_o` (observations of
+    object `obj_id`) re-expressed in object frames translated so that each object's points keep their mean
+    position from before the BA (`X_o_before`): the same world points and motion, (X_o, T_w_o, v_o).
+
+    The BA fixes each object frame's gauge by holding one pose, the tracker's, whose position is the
+    tracking filter's and not the one its points were measured at: the BA then moves the object frame along
+    the body (all its points shift together). Output trajectories must follow one body-fixed point, and the
+    object's points outside the window keep their coordinates. A translation d of the frame (X' = X + d,
+    T' = T [I, -d]) changes eq. (5)'s linear velocity to v - w x d (first order in dt), the angular one not."""
+    X_o, T_w_o, v_o = X_o.copy(), T_w_o.copy(), v_o.copy()
+    n = int(max(pt_obj.max(initial=-1), obj_id.max(initial=-1))) + 1
+    counts = np.bincount(pt_obj, minlength=n)
+    shift = np.column_stack([np.bincount(pt_obj, X_o_before[:, i] - X_o[:, i], minlength=n) for i in range(3)])
+    shift /= np.maximum(counts, 1)[:, None]
+    X_o += shift[pt_obj]
+    d = shift[obj_id]
+    T_w_o[:, :3, 3] -= np.einsum("fij,fj->fi", T_w_o[:, :3, :3], d)
+    v_o -= np.cross(w_o, d)
+    return X_o, T_w_o, v_o
+
+
 def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int], camera_weak: bool,
                     mapper, config: SlamConfig) -> dict[str, int]:
     """BA with objects for keyframe `kf` (module docstring); returns the parameter counts of the window
@@ -71,6 +94,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     opt_ids = np.concatenate(oobs_kp_pt)
     obj_pts, oobs_pt = np.unique(opt_ids, return_inverse=True)
     track_row = {tr.track_id: k for k, tr in enumerate(tracks)}
+    track_of_point = np.array([track_row[int(t)] for t in P.track[obj_pts]])
     oobs_meas = np.concatenate([map_.keyframes[o.kf_id].measurements(o.kp_idx) for _, o in obs_list])
     oobs_inv_sigma2 = np.concatenate([mapper.inv_level_sigma2[map_.keyframes[o.kf_id].keypoints.octave[o.kp_idx]]
                                       for _, o in obs_list])
@@ -98,7 +122,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         T_w_o=np.stack([o.T_w_o for _, o in obs_list]),
         v_o=np.stack([o.v_o for _, o in obs_list]), w_o=np.stack([o.w_o for _, o in obs_list]),
         timestamps=np.array([map_.keyframes[k].timestamp for k in all_ids]),
-        X_o=P.X_o[obj_pts].copy(), pt_obj=np.array([track_row[int(t)] for t in P.track[obj_pts]]),
+        X_o=P.X_o[obj_pts].copy(), pt_obj=track_of_point,
         oobs_f=oobs_f, oobs_pt=oobs_pt, oobs_meas=oobs_meas, oobs_inv_sigma2=oobs_inv_sigma2,
         optimize_static=camera_weak, optimize_objects=True,
     )
@@ -107,10 +131,12 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         return {}
     for i, k in enumerate(free_ids):
         map_.keyframes[k].T_c_w = rigid(result.T_c_w[i])
-    P.X_o[obj_pts] = result.X_o
+    X_o, T_w_o, v_o = keep_object_origins(P.X_o[obj_pts], result.X_o, track_of_point, result.T_w_o, result.v_o,
+                                          result.w_o, problem.obj_id)
+    P.X_o[obj_pts] = X_o
     for f, (k, o) in enumerate(obs_list):
-        o.T_w_o = rigid(result.T_w_o[f])
-        o.v_o, o.w_o = result.v_o[f].copy(), result.w_o[f].copy()
+        o.T_w_o = rigid(T_w_o[f])
+        o.v_o, o.w_o = v_o[f], result.w_o[f].copy()
         if o is tracks[k].last and tracks[k].state_mean is not None:  # the tracking filter restarts from BA
             tracks[k].state_mean[:3] = o.T_w_o[:3, 3]
         good = result.obj_inlier[oobs_f == f]
