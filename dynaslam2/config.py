@@ -251,7 +251,8 @@ class ObjectOptimConfig:
     # them, 3: in 49 %. End to end on bench_dynamic's 12 sequences (150 fr, 640x480), 0 -> 3 -> 10: object ATE
     # 0.301 -> 0.280 -> 0.313 m, mean ego ATE 0.0222 -> 0.0228 -> 0.0251 m, id switches 34 -> 31 -> 35. On its 20
     # sequences (seeds 0-4) after keep_object_origins, 0 -> 3: 0.306 -> 0.286 m, 0.0212 -> 0.0222 m, 63 -> 60 (the
-    # noise of these means: a 0.5 % change of sigma_motion_xyz moves them by ~0.01 m, ~0.0001 m (single sequences up to 6 mm) and ~2).
+    # noise of these means: a 0.5 % change of sigma_motion_xyz moves them by ~0.01 m, ~0.0001 m (single sequences
+    # up to 6 mm) and ~2).
     disparity_weight: float = 3.0
     # Joint case (camera and object weak): True = the static terms (eq. 1) linearized once at the window's
     # estimate (Huber weights there; after the static local BA with objects.static_ba_first) and reduced to

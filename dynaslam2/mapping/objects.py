@@ -37,7 +37,8 @@ def _static_window(kf: KeyFrame, map_: Map, config: SlamConfig) -> tuple[list[in
 
 
 def keep_object_origins(X_o_before: np.ndarray, X_o: np.ndarray, pt_obj: np.ndarray, T_w_o: np.ndarray,
-                        v_o: np.ndarray, w_o: np.ndarray, obj_id: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        v_o: np.ndarray, w_o: np.ndarray,
+                        obj_id: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The BA's object points `X_o` (object `pt_obj`), poses `T_w_o` and linear velocities `v_o` (observations of
     object `obj_id`) re-expressed in object frames translated so that each object's points keep their mean
     position from before the BA (`X_o_before`): the same world points and motion, (X_o, T_w_o, v_o).
