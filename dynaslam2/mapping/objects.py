@@ -1,5 +1,6 @@
 """Local bundle adjustment with objects on a new keyframe (paper III-D): assembles the window from
-the static map and the object map, runs `optim.object_ba.object_bundle_adjustment`, writes back.
+the static map and the object map, runs `optim.object_ba.object_bundle_adjustment`, writes back (each object
+frame kept where it was on its body: `keep_object_origins`).
 
 Cases (the camera-weak-only case is the static local BA of `LocalMapper.local_ba`):
 - object weak only: the weak objects' poses, velocities and points, and the keyframes that observe
