@@ -138,7 +138,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     P.X_o[obj_pts] = X_o
     for f, (k, o) in enumerate(obs_list):
         o.T_w_o = rigid(T_w_o[f])
-        o.v_o, o.w_o = v_o[f], result.w_o[f].copy()
+        o.v_o, o.w_o = v_o[f].copy(), result.w_o[f].copy()
         if o is tracks[k].last and tracks[k].state_mean is not None:  # the tracking filter restarts from BA
             tracks[k].state_mean[:3] = o.T_w_o[:3, 3]
         good = result.obj_inlier[oobs_f == f]
