@@ -372,8 +372,8 @@ class ORBExtractor:
         return angle, desc
 
     def _describe(self, img: np.ndarray, kps: list, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
-        """rBRIEF descriptors on the blurred level (OpenCV's ORB) of FAST's own keypoint objects `kps`, moved
-        to level coordinates `xy` and given `angle` (no keypoint is built in Python). All keypoints are
+        """rBRIEF descriptors on the blurred level (OpenCV's ORB) of the keypoint objects `kps` (FAST's own in
+        `extract`: none built in Python there), moved to level coordinates `xy` and given `angle`. All keypoints are
         >= edge_threshold inside the level: OpenCV keeps them, in order."""
         list(map(setattr, kps, repeat("pt"), zip(xy[:, 0].tolist(), xy[:, 1].tolist())))
         list(map(setattr, kps, repeat("angle"), angle.tolist()))

@@ -95,8 +95,10 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     oobs_f = np.concatenate(oobs_f)
     opt_ids = np.concatenate(oobs_kp_pt)
     obj_pts, oobs_pt = np.unique(opt_ids, return_inverse=True)
-    track_row = {tr.track_id: k for k, tr in enumerate(tracks)}
-    track_of_point = np.array([track_row[int(t)] for t in P.track[obj_pts]])
+    track_ids = np.array(weak, dtype=np.int64)
+    track_row = np.full(track_ids.max() + 1, -1, dtype=np.int64)  # track id -> index into `tracks`
+    track_row[track_ids] = np.arange(len(track_ids))
+    track_of_point = track_row[P.track[obj_pts]]
     oobs_meas = np.concatenate([map_.keyframes[o.kf_id].measurements(o.kp_idx) for _, o in obs_list])
     oobs_inv_sigma2 = np.concatenate([mapper.inv_level_sigma2[map_.keyframes[o.kf_id].keypoints.octave[o.kp_idx]]
                                       for _, o in obs_list])
