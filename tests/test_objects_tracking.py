@@ -493,3 +493,15 @@ def test_ba_write_back_keeps_each_object_frame_on_the_body():
         d = np.linalg.norm(shift[k])
         assert errors[0] < dt**2 * np.linalg.norm(w[f]) ** 2 * d  # second order in dt
         assert errors[1] > 5 * errors[0]  # without the correction, first order (dt |w x d|)
+
+
+def test_ba_write_back_without_object_points_keeps_the_poses():
+    """A window whose objects have observations but no point (a coasting track's) leaves their poses and
+    velocities as the BA gave them (it crashed on the integer sums of an empty point set)."""
+    from dynaslam2.mapping.objects import keep_object_origins
+
+    T = np.stack([make_pose(so3_exp(np.array([0.1, 0.2, 0.3])), np.array([1.0, 2.0, 3.0]))] * 2)
+    v, w = np.ones((2, 3)), np.full((2, 3), 0.5)
+    X_o, T_w_o, v_o = keep_object_origins(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), T, v, w,
+                                          np.array([0, 0]))
+    assert X_o.shape == (0, 3) and np.array_equal(T_w_o, T) and np.array_equal(v_o, v)

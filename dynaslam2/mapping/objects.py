@@ -53,7 +53,7 @@ def keep_object_origins(X_o_before: np.ndarray, X_o: np.ndarray, pt_obj: np.ndar
     n = int(max(pt_obj.max(initial=-1), obj_id.max(initial=-1))) + 1
     counts = np.bincount(pt_obj, minlength=n)
     shift = np.column_stack([np.bincount(pt_obj, X_o_before[:, i] - X_o[:, i], minlength=n) for i in range(3)])
-    shift /= np.maximum(counts, 1)[:, None]
+    shift = shift.astype(float) / np.maximum(counts, 1)[:, None]  # float when no object has a point in the window
     X_o += shift[pt_obj]
     d = shift[obj_id]
     T_w_o[:, :3, 3] -= np.einsum("fij,fj->fi", T_w_o[:, :3, :3], d)
