@@ -338,6 +338,31 @@ def test_small_instance_creates_an_object_from_fewer_close_points():
             assert result.estimates[0].n_points == 7
 
 
+def test_an_instance_goes_to_the_object_its_keypoints_support_most():
+    """Car A is hidden but for 9 keypoints and 21 keypoints of car B, in front of it, carry the look of A's
+    hidden points (a repeated texture): A's matches fall mostly on B's instance, more than B's own 25. B's
+    instance goes to B, whose pose it supports with more inliers, and A is measured on its own 9; taking
+    the tracks in the order of their match counts gave B's instance to A and lost B."""
+    rng = np.random.default_rng(13)
+    dims = (4.0, 1.5, 1.5)
+    car_a, car_b = Body(rng, 1001, 80, dims), Body(rng, 1002, 80, dims)
+    T_a = [make_pose(np.eye(3), np.array([0.2 * i, 0.3, 15.0])) for i in range(5)]
+    T_b = [make_pose(np.eye(3), np.array([-5.0 + 0.2 * i, 0.3, 12.0])) for i in range(5)]
+    objects, trk = ObjectMap(), tracker()
+    for i in range(4):
+        estimates = trk.track(make_frame(i, [(car_a, T_a[i]), (car_b, T_b[i])]), None, objects).estimates
+    id_of = {e.instance_id: e.track_id for e in estimates}
+    order = rng.permutation(80)
+    visible_a, look_of_a, visible_b = Body(rng, 1001, 9, dims), Body(rng, 1002, 21, dims), Body(rng, 1002, 25, dims)
+    visible_a.X_b, visible_a.desc = car_a.X_b[order[:9]], car_a.desc[order[:9]]
+    look_of_a.X_b, look_of_a.desc = car_a.X_b[order[9:30]] * 0.9, car_a.desc[order[9:30]]
+    visible_b.X_b, visible_b.desc = car_b.X_b[:25], car_b.desc[:25]
+    T_look = make_pose(np.eye(3), T_a[4][:3, 3] * 0.9)  # on B's instance, 1.5 m in front of A, same pixels
+    frame = make_frame(4, [(visible_a, T_a[4]), (look_of_a, T_look), (visible_b, T_b[4])])
+    estimates = trk.track(frame, None, objects).estimates
+    assert {e.instance_id: e.track_id for e in estimates} == id_of
+
+
 def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong():
     """A car whose velocity estimate is badly wrong (its motion-compensated box lands elsewhere) and
     whose appearance changes keeps its id through the IoU of its last box, as it was."""

@@ -8,7 +8,8 @@ Per frame, after the camera is tracked on static features only:
 (b) the others, or those with too few matches in (a): brute-force matching of their points with the
     keypoints of the instance that overlaps their last 2D box most (consecutive frames);
 then one pose-only optimization per object from its matches on one instance (of its class, the
-unclaimed one holding most of them); an instance holds at most one object.
+unclaimed one holding most of them); an instance holds at most one object, the one whose pose it
+supports with the most inliers (an object matched onto a neighbour's instance then tries its own).
 Unclaimed instances with enough close keypoints with depth become objects, unless their keypoints
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
@@ -272,26 +273,26 @@ class ObjectTracker:
                 match = self._search_overlap(frame, objects, tr, pred[tr.track_id], dyn, inst_ids, boxes)
                 if match is not None:
                     candidates[tr.track_id] = match
-        # Pose per object, the best supported first; an instance holds one object.
+        # Pose per object on one instance; an instance holds one object: the one whose pose it supports with the
+        # most inliers. An object whose instance went to another tries its next instance.
         claimed: set[int] = set()
         seen: list[int] = []
-        for tid in sorted(candidates, key=lambda k: (-len(candidates[k][0]), k)):
-            tr = objects.tracks[tid]
-            kp, pts = self._one_instance(frame, tr, *candidates[tid], free, claimed)
-            if len(kp) < cfg.min_inliers:
-                continue
-            est = self.estimate_pose(frame, objects, tr, pred[tid], kp, pts, robust_init=not tr.velocity_known)
-            if est is None:
-                continue
-            T_w_o, inl = est
-            inst = int(np.bincount(np.searchsorted(inst_ids, frame.instance_id[kp[inl]])).argmax())
-            if int(inst_ids[inst]) in claimed:
-                continue
+        proposals = {tid: self._propose(frame, objects, objects.tracks[tid], pred[tid], *candidates[tid], free, claimed)
+                     for tid in candidates}
+        while any(p is not None for p in proposals.values()):
+            tid = min((k for k, p in proposals.items() if p is not None),
+                      key=lambda k: (-np.count_nonzero(proposals[k][2]), k))
+            tr, (T_w_o, kp, inl, pts) = objects.tracks[tid], proposals.pop(tid)
+            inst = int(np.searchsorted(inst_ids, frame.instance_id[kp[0]]))
             claimed.add(int(inst_ids[inst]))
             self._fuse_points(frame, objects, T_w_o, kp[inl], pts[inl])
             self._observe(frame, objects, tr, T_w_o, kp[inl], pts[inl], int(inst_ids[inst]), boxes[inst])
             free[kp[inl]] = False
             seen.append(tid)
+            for other, p in proposals.items():
+                if p is not None and int(frame.instance_id[p[1][0]]) in claimed:
+                    proposals[other] = self._propose(frame, objects, objects.tracks[other], pred[other],
+                                                     *candidates[other], free, claimed)
         # Unclaimed instances: re-appearing objects or new ones. The box join's mutual-best test counts the
         # instances that can still join a track: unclaimed, with enough close keypoints unless tracks coast.
         # (Each instance's points once: an instance only takes its own keypoints out of `free`.)
@@ -310,6 +311,16 @@ class ObjectTracker:
                 can_join[k] = False
         self._cull(objects, seen)
         return self._result(frame, objects, seen, dyn)
+
+    def _propose(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, kp: np.ndarray,
+                 pts: np.ndarray, free: np.ndarray, claimed: set[int]) -> tuple | None:
+        """The pose of `track` from its matches keypoint `kp` <-> point `pts` kept on one unclaimed instance
+        (`_one_instance`): (T_w_o, kept keypoints, inlier mask, kept points), or None."""
+        kp, pts = self._one_instance(frame, track, kp, pts, free, claimed)
+        if len(kp) < self.cfg.min_inliers:
+            return None
+        est = self.estimate_pose(frame, objects, track, T_w_o_pred, kp, pts, robust_init=not track.velocity_known)
+        return None if est is None else (est[0], kp, est[1], pts)
 
     def _one_instance(self, frame: Frame, track: ObjectTrack, kp: np.ndarray, pts: np.ndarray, free: np.ndarray,
                       claimed: set[int]) -> tuple[np.ndarray, np.ndarray]:
