@@ -38,6 +38,17 @@ DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtyp
 
 
 @dataclass
+class PoseProposal:
+    """An object's pose from its matches keypoint `kp` <-> object point `pts` on instance `instance_id`."""
+
+    T_w_o: np.ndarray
+    kp: np.ndarray
+    pts: np.ndarray
+    inliers: np.ndarray  # (len(kp),) bool
+    instance_id: int
+
+
+@dataclass
 class ObjectFrameResult:
     """Objects of one frame: estimates (one per object seen), inlier dynamic matches, and the ids of
     objects whose tracking is weak (III-D: they ask for a keyframe)."""
@@ -281,16 +292,17 @@ class ObjectTracker:
                      for tid in candidates}
         while any(p is not None for p in proposals.values()):
             tid = min((k for k, p in proposals.items() if p is not None),
-                      key=lambda k: (-np.count_nonzero(proposals[k][2]), k))
-            tr, (T_w_o, kp, inl, pts) = objects.tracks[tid], proposals.pop(tid)
-            inst = int(np.searchsorted(inst_ids, frame.instance_id[kp[0]]))
-            claimed.add(int(inst_ids[inst]))
-            self._fuse_points(frame, objects, T_w_o, kp[inl], pts[inl])
-            self._observe(frame, objects, tr, T_w_o, kp[inl], pts[inl], int(inst_ids[inst]), boxes[inst])
-            free[kp[inl]] = False
+                      key=lambda k: (-np.count_nonzero(proposals[k].inliers), k))
+            best = proposals.pop(tid)
+            kp, pts = best.kp[best.inliers], best.pts[best.inliers]
+            inst = int(np.searchsorted(inst_ids, best.instance_id))
+            claimed.add(best.instance_id)
+            self._fuse_points(frame, objects, best.T_w_o, kp, pts)
+            self._observe(frame, objects, objects.tracks[tid], best.T_w_o, kp, pts, best.instance_id, boxes[inst])
+            free[kp] = False
             seen.append(tid)
             for other, p in proposals.items():
-                if p is not None and int(frame.instance_id[p[1][0]]) in claimed:
+                if p is not None and p.instance_id == best.instance_id:
                     proposals[other] = self._propose(frame, objects, objects.tracks[other], pred[other],
                                                      *candidates[other], free, claimed)
         # Unclaimed instances: re-appearing objects or new ones. The box join's mutual-best test counts the
@@ -313,14 +325,14 @@ class ObjectTracker:
         return self._result(frame, objects, seen, dyn)
 
     def _propose(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, kp: np.ndarray,
-                 pts: np.ndarray, free: np.ndarray, claimed: set[int]) -> tuple | None:
+                 pts: np.ndarray, free: np.ndarray, claimed: set[int]) -> PoseProposal | None:
         """The pose of `track` from its matches keypoint `kp` <-> point `pts` kept on one unclaimed instance
-        (`_one_instance`): (T_w_o, kept keypoints, inlier mask, kept points), or None."""
+        (`_one_instance`), or None."""
         kp, pts = self._one_instance(frame, track, kp, pts, free, claimed)
         if len(kp) < self.cfg.min_inliers:
             return None
         est = self.estimate_pose(frame, objects, track, T_w_o_pred, kp, pts, robust_init=not track.velocity_known)
-        return None if est is None else (est[0], kp, est[1], pts)
+        return None if est is None else PoseProposal(est[0], kp, pts, est[1], int(frame.instance_id[kp[0]]))
 
     def _one_instance(self, frame: Frame, track: ObjectTrack, kp: np.ndarray, pts: np.ndarray, free: np.ndarray,
                       claimed: set[int]) -> tuple[np.ndarray, np.ndarray]:
