@@ -446,8 +446,9 @@ class ObjectsConfig:
     join_ratio: float = 0.5
     min_join_matches: int = 6
     join_iou: float = 0.3
-    # A walking pedestrian's pose-only optimization often fails (4-5 rigid inliers of 6-11 matches) and its track
-    # coasts on box joins; beyond join_max_gap_s since its last measured pose its instance starts a new track.
+    # A pedestrian's track often goes unmeasured for some frames (half its listed frames on crossing s0-s3 show <= 2
+    # keypoints with stereo depth; 16 % of its pose-only optimizations fail on crossing s0/s2) and coasts on box
+    # joins; beyond join_max_gap_s since its last measured pose its instance starts a new track.
     # bench_dynamic's 20 sequences (traffic, following, crossing, static s0-s4, 150 fr, 640x480), 0.5 -> 0.8 -> 1.0
     # s: id switches 60 -> 45 -> 45 (crossing 51 -> 31 -> 30), object ATE 0.286 -> 0.291 -> 0.301 m (crossing s2
     # 0.47 -> 0.50 -> 0.71 m: a prediction running away), TP 0.751 -> 0.753 -> 0.754, ego ATE 0.0222 -> 0.0220 ->
