@@ -100,6 +100,27 @@ def level_scales(pyramid: list[np.ndarray]) -> np.ndarray:
     return np.array([(w / p.shape[1], h / p.shape[0]) for p in pyramid], np.float64)
 
 
+def _open_cells(mask_sum: np.ndarray, scale_xy: np.ndarray, edge: int, w: int, h: int, cw: int, ch: int,
+                n_cx: int, n_cy: int) -> np.ndarray:
+    """(n_cy, n_cx) bool: the cells of a level's FAST grid (cw x ch from `edge`, corners < size - edge) that hold
+    a pixel whose nearest level-0 pixel (`level_to_base`, clipped to the image) the mask allows; `mask_sum`:
+    the integral image of the level-0 mask."""
+    H, W = mask_sum.shape[0] - 1, mask_sum.shape[1] - 1
+
+    def level0_range(first: np.ndarray, last: np.ndarray, scale: float, size: int) -> tuple[np.ndarray, np.ndarray]:
+        lo = np.clip(np.rint((first + 0.5) * scale - 0.5), 0, size - 1).astype(np.int64)
+        hi = np.clip(np.rint((last + 0.5) * scale - 0.5), 0, size - 1).astype(np.int64)
+        return lo, hi + 1
+
+    x = edge + np.arange(n_cx) * cw
+    y = edge + np.arange(n_cy) * ch
+    u0, u1 = level0_range(x, np.minimum(x + cw, w - edge) - 1, scale_xy[0], W)
+    v0, v1 = level0_range(y, np.minimum(y + ch, h - edge) - 1, scale_xy[1], H)
+    S = mask_sum
+    count = S[v1[:, None], u1] - S[v0[:, None], u1] - S[v1[:, None], u0] + S[v0[:, None], u0]
+    return count > 0
+
+
 def level_to_base(xy: np.ndarray, scale_xy: np.ndarray) -> np.ndarray:
     """Level pixel coordinates -> level-0 pixels; pixel centres at integers, as cv2.resize maps them:
     u0 = (x_l + 0.5) * W / W_l - 0.5 per axis. `scale_xy` broadcasts against `xy` (e.g. (N,2) or (N,))."""
@@ -221,6 +242,7 @@ class ORBExtractor:
             if mask.shape != pyramid[0].shape:
                 raise InputError(f"mask: expected shape {pyramid[0].shape}, got {mask.shape}")
             mask = mask.astype(bool, copy=False)
+        mask_sum = None if mask is None else cv2.integral(mask.view(np.uint8))
         budgets = self.level_budgets
         if n_features is not None:
             if n_features <= 0:
@@ -232,7 +254,7 @@ class ORBExtractor:
         parts = []
         stages = dict.fromkeys(("fast", "spread", "orientation", "descriptors"), 0.0)
         for lv in np.flatnonzero(budgets > 0).tolist():  # one level at a time: its image stays in cache
-            part = self._extract_level(pyramid[lv], scales[lv], mask, int(budgets[lv]), stages)
+            part = self._extract_level(pyramid[lv], scales[lv], mask, mask_sum, int(budgets[lv]), stages)
             if part is not None:
                 parts.append((lv, part))
         if timing_ms is not None:
@@ -273,13 +295,14 @@ class ORBExtractor:
         if worker is not None and worker[0] == os.getpid():
             worker[1].shutdown(wait=False)
 
-    def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray]:
+    def _detect(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None,
+                mask_sum: np.ndarray | None) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray]:
         """FAST candidates by ORB-SLAM2's per-cell rule: a cell keeps its corners at ini_th_fast, or those at
         min_th_fast where it has none. Same corners and scores as FAST on the whole level: FAST at ini_th_fast
         runs on the level less its edge, FAST at min_th_fast on a copy blanked outside the cells without a
         corner, except the 4 px rim that the scores (3 px radius) and the non-maximum suppression (1 px more)
         of their corners read. Corners count only >= edge_threshold inside the level and where `mask`
-        (level 0) allows, in FAST's raster order (strong, then fallback).
+        (level 0) allows, in FAST's raster order (strong, then fallback); `mask_sum`: its integral image.
         Returns (the cv2 keypoints of the FAST calls, index of each candidate in them, integer xy at this
         level, score); the keypoint objects are reused for the descriptors (`_describe`)."""
         cfg = self.cfg
@@ -300,34 +323,48 @@ class ORBExtractor:
             uv = np.rint(level_to_base(xy[idx].astype(np.float64), scale_xy)).astype(np.int64)
             return idx[mask[np.clip(uv[:, 1], 0, mask.shape[0] - 1), np.clip(uv[:, 0], 0, mask.shape[1] - 1)]]
 
-        # The view from edge - 4: corners at >= edge keep their true suppression neighbours.
-        raw = self._fast_ini.detect(img[edge - 4 : h - edge + 4, edge - 4 : w - edge + 4])
-        xy = np.asarray(cv2.KeyPoint.convert(raw), np.float32).reshape(-1, 2) + np.float32(edge - 4)
-        src = usable(np.flatnonzero((xy[:, 0] >= edge) & (xy[:, 0] < w - edge) & (xy[:, 1] >= edge) & (xy[:, 1] < h - edge)), xy)
+        # Where `mask` allows nothing no corner counts: FAST runs only on the cells' bounding box that do allow
+        # some (the whole grid without a mask), viewed with a 4 px rim so that the corners inside it keep their
+        # true scores and suppression neighbours.
+        open_cells = np.ones((n_cy, n_cx), bool) if mask_sum is None else _open_cells(mask_sum, scale_xy, edge, w, h, cw, ch,
+                                                                                         n_cx, n_cy)
+        rows, cols = np.flatnonzero(open_cells.any(axis=1)), np.flatnonzero(open_cells.any(axis=0))
+        if len(rows) == 0:
+            return (), np.zeros(0, np.int64), np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
+        x0, x1 = edge + cols[0] * cw, min(edge + (cols[-1] + 1) * cw, w - edge)
+        y0, y1 = edge + rows[0] * ch, min(edge + (rows[-1] + 1) * ch, h - edge)
+        view = img[y0 - 4 : y1 + 4, x0 - 4 : x1 + 4]
+        offset = np.array([x0 - 4, y0 - 4], np.float32)
+        raw = self._fast_ini.detect(view)
+        xy = np.asarray(cv2.KeyPoint.convert(raw), np.float32).reshape(-1, 2) + offset
+        src = usable(np.flatnonzero((xy[:, 0] >= x0) & (xy[:, 0] < x1) & (xy[:, 1] >= y0) & (xy[:, 1] < y1)), xy)
         xy, resp = xy[src], np.fromiter(map(attrgetter("response"), raw), np.float32, len(raw))[src]
         strong = np.zeros((n_cy, n_cx), bool)
         cell = (xy.astype(np.int64) - edge) // (cw, ch)  # corners are inside the grid
         strong[cell[:, 1], cell[:, 0]] = True
-        if strong.all():
+        weak = open_cells & ~strong
+        if not weak.any():
             return raw, src, xy, resp
         # Second pass on a copy blanked outside the empty cells except a 4 px rim (all that the scores and
         # the suppression of their corners read); FAST's mask keeps the corners inside the empty cells.
         weak_cells = np.zeros((h, w), np.uint8)
-        grid = np.repeat(np.repeat(~strong, ch, axis=0), cw, axis=1)[: h - 2 * edge, : w - 2 * edge]
+        grid = np.repeat(np.repeat(weak, ch, axis=0), cw, axis=1)[: h - 2 * edge, : w - 2 * edge]
         weak_cells[edge : h - edge, edge : w - edge] = grid.view(np.uint8) * np.uint8(255)
-        raw_w = self._fast_min.detect(cv2.bitwise_and(img, cv2.dilate(weak_cells, np.ones((9, 9), np.uint8))), weak_cells)
+        weak_cells = weak_cells[y0 - 4 : y1 + 4, x0 - 4 : x1 + 4]
+        raw_w = self._fast_min.detect(cv2.bitwise_and(view, cv2.dilate(weak_cells, np.ones((9, 9), np.uint8))), weak_cells)
         if not raw_w:
             return raw, src, xy, resp
-        xy_w = cv2.KeyPoint.convert(raw_w)
+        xy_w = np.asarray(cv2.KeyPoint.convert(raw_w), np.float32).reshape(-1, 2) + offset
         src_w = usable(np.arange(len(raw_w)), xy_w)
         resp_w = np.fromiter(map(attrgetter("response"), raw_w), np.float32, len(raw_w))
         return raw + raw_w, np.concatenate([src, src_w + len(raw)]), np.concatenate([xy, xy_w[src_w]]), np.concatenate([resp, resp_w[src_w]])
 
-    def _extract_level(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, budget: int, stages: dict[str, float]):
+    def _extract_level(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, mask_sum: np.ndarray | None,
+                       budget: int, stages: dict[str, float]):
         """(xy at this level, angle, response, descriptors) of one level's spread keypoints, or None; adds the
         seconds of each stage to `stages`."""
         t0 = time.perf_counter()
-        raw, src, xy, resp = self._detect(img, scale_xy, mask)
+        raw, src, xy, resp = self._detect(img, scale_xy, mask, mask_sum)
         t1 = time.perf_counter()
         stages["fast"] += t1 - t0
         if len(xy) == 0:
