@@ -323,11 +323,13 @@ class ORBExtractor:
             uv = np.rint(level_to_base(xy[idx].astype(np.float64), scale_xy)).astype(np.int64)
             return idx[mask[np.clip(uv[:, 1], 0, mask.shape[0] - 1), np.clip(uv[:, 0], 0, mask.shape[1] - 1)]]
 
-        # Where `mask` allows nothing no corner counts: FAST runs only on the cells' bounding box that do allow
+        # Where `mask` allows nothing no corner counts: FAST runs only on the bounding box of the cells that allow
         # some (the whole grid without a mask), viewed with a 4 px rim so that the corners inside it keep their
         # true scores and suppression neighbours.
-        open_cells = np.ones((n_cy, n_cx), bool) if mask_sum is None else _open_cells(mask_sum, scale_xy, edge, w, h, cw, ch,
-                                                                                         n_cx, n_cy)
+        if mask_sum is None:
+            open_cells = np.ones((n_cy, n_cx), bool)
+        else:
+            open_cells = _open_cells(mask_sum, scale_xy, edge, w, h, cw, ch, n_cx, n_cy)
         rows, cols = np.flatnonzero(open_cells.any(axis=1)), np.flatnonzero(open_cells.any(axis=0))
         if len(rows) == 0:
             return (), np.zeros(0, np.int64), np.zeros((0, 2), np.float32), np.zeros(0, np.float32)
@@ -351,7 +353,8 @@ class ORBExtractor:
         grid = np.repeat(np.repeat(weak, ch, axis=0), cw, axis=1)[: h - 2 * edge, : w - 2 * edge]
         weak_cells[edge : h - edge, edge : w - edge] = grid.view(np.uint8) * np.uint8(255)
         weak_cells = weak_cells[y0 - 4 : y1 + 4, x0 - 4 : x1 + 4]
-        raw_w = self._fast_min.detect(cv2.bitwise_and(view, cv2.dilate(weak_cells, np.ones((9, 9), np.uint8))), weak_cells)
+        rim = cv2.dilate(weak_cells, np.ones((9, 9), np.uint8))
+        raw_w = self._fast_min.detect(cv2.bitwise_and(view, rim), weak_cells)
         if not raw_w:
             return raw, src, xy, resp
         xy_w = np.asarray(cv2.KeyPoint.convert(raw_w), np.float32).reshape(-1, 2) + offset
@@ -359,8 +362,8 @@ class ORBExtractor:
         resp_w = np.fromiter(map(attrgetter("response"), raw_w), np.float32, len(raw_w))
         return raw + raw_w, np.concatenate([src, src_w + len(raw)]), np.concatenate([xy, xy_w[src_w]]), np.concatenate([resp, resp_w[src_w]])
 
-    def _extract_level(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None, mask_sum: np.ndarray | None,
-                       budget: int, stages: dict[str, float]):
+    def _extract_level(self, img: np.ndarray, scale_xy: np.ndarray, mask: np.ndarray | None,
+                       mask_sum: np.ndarray | None, budget: int, stages: dict[str, float]):
         """(xy at this level, angle, response, descriptors) of one level's spread keypoints, or None; adds the
         seconds of each stage to `stages`."""
         t0 = time.perf_counter()
