@@ -387,6 +387,19 @@ class ObjectsConfig:
     # 0.30 -> 0.33 of their frames), id switches 60 -> 125 (crossing 51 -> 102), object ATE 0.286 -> 0.299 m.
     small_new_fraction: float = 0.0
     max_point_depth_m: float = 40.0
+    # ORB budget of the keypoints on dynamic-class instances, a pass of its own after one that leaves the
+    # instances out (the static keypoints are then `masked` mode's, orb.n_features for them alone), on pyramid
+    # levels 0..features_max_level (the budgets of the levels above are dropped, not moved: 600 -> <= 404);
+    # 0: one pass over the whole image, the instances keeping the keypoints that fall on them (~380 of 2000 on
+    # sim crossing s0; the paper does not say which). On bench_dynamic's 20 sequences (traffic, following,
+    # crossing, static s0-s4, 150 fr, 640x480), one pass -> 400 (levels 0-7) -> 800 (0-7) -> 400 (0-3) -> 600 (0-3):
+    # object ATE 0.290 -> 0.262 -> 0.276 -> 0.243 -> 0.249 m, TP 0.753 -> 0.810 -> 0.841 -> 0.773 -> 0.809
+    # (pedestrians 0.31 -> 0.42 -> 0.49 -> 0.32 -> 0.41 of their frames), id switches 47 -> 61 -> 64 -> 50 -> 62
+    # (on unoccluded frames 6 -> 10 -> 6 -> 7 -> 7), mean ego ATE 0.0220 -> 0.0235 -> 0.0242 -> 0.0213 -> 0.0232 m
+    # (`masked` 0.0296 m; dynamic <= masked on 13, 18, 18, 18, 14 of the 20: the per-sequence ego ATE moves by
+    # up to 0.02 m between runs that differ in the objects alone).
+    n_features: int = 600
+    features_max_level: int = 3
     # Not in the paper: a second ORB pass (budget densify_features, 0: off) on the dynamic-class instances that
     # the first pass gave fewer than densify_below keypoints, on pyramid levels 0..densify_max_level (a
     # level-7 patch is ~110 px: on a 20 px object it describes the background). At 640x480 the first pass
@@ -527,7 +540,8 @@ class ObjectsConfig:
                      "position_floor_m", "initial_speed_sigma", "gate_nis"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
-        for name in ("coast_max_s", "pose_disparity_weight", "densify_features", "densify_max_level"):
+        for name in ("coast_max_s", "pose_disparity_weight", "n_features", "features_max_level", "densify_features",
+                     "densify_max_level"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"objects.{name}: expected >= 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",

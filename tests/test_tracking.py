@@ -103,11 +103,11 @@ def test_modes_drop_or_flag_features_on_dynamic_instances():
     instances[100:300, 200:400] = CLASS_IDS["car"] * 1000 + 1
     data = _textured_frame(instances)
 
-    def build(mode):
-        cfg = load_config(None, [f"mode={mode}", "orb.n_features=800", "tracking.mask_dilation_px=4"])
+    def build(mode, *overrides):
+        cfg = load_config(None, [f"mode={mode}", "orb.n_features=800", "tracking.mask_dilation_px=4", *overrides])
         return FrameBuilder(cfg, CAMERA).build(data, {})
 
-    static, masked, dynamic = build("static"), build("masked"), build("dynamic")
+    static, masked, dynamic = build("static"), build("masked"), build("dynamic", "objects.n_features=0")
     # The box dilated by 4 px, with the half pixel of keypoint rounding.
     inside = lambda f: ((f.keypoints.uv[:, 0] >= 195.5) & (f.keypoints.uv[:, 0] < 403.5)  # noqa: E731
                         & (f.keypoints.uv[:, 1] >= 95.5) & (f.keypoints.uv[:, 1] < 303.5))
@@ -117,8 +117,18 @@ def test_modes_drop_or_flag_features_on_dynamic_instances():
     assert np.array_equal(static.class_id, np.where(on_car, CLASS_IDS["car"], 0))
     assert np.array_equal(static.instance_id, np.where(on_car, CLASS_IDS["car"] * 1000 + 1, 0))
     assert inside(masked).sum() == 0 and len(masked) > 0.8 * len(static)  # the budget moves elsewhere
-    assert np.array_equal(dynamic.keypoints.uv, static.keypoints.uv)
+    assert np.array_equal(dynamic.keypoints.uv, static.keypoints.uv)  # one pass: the car keeps what falls on it
     assert not dynamic.static[on_car].any() and dynamic.static[~inside(dynamic)].all()
+    # objects.n_features: masked mode's keypoints, then the car's own pass (its budget on levels 0..2, only on the
+    # car).
+    separate = build("dynamic", "objects.n_features=150", "objects.features_max_level=2")
+    n = len(masked)
+    assert np.array_equal(separate.keypoints.uv[:n], masked.keypoints.uv) and separate.static[:n].all()
+    col, row = np.rint(separate.keypoints.uv[n:, 0]), np.rint(separate.keypoints.uv[n:, 1])
+    assert 50 <= len(col) <= 150 and np.all((col >= 200) & (col < 400) & (row >= 100) & (row < 300))
+    assert set(separate.keypoints.octave[n:].tolist()) == {0, 1, 2}
+    assert not separate.static[n:].any() and np.all(separate.instance_id[n:] == CLASS_IDS["car"] * 1000 + 1)
+    assert np.mean(separate.depth[n:] > 0) > 0.5  # stereo-matched with the first pass's keypoints
     # Stereo works on the shifted image: depth = bf / 8.
     d = static.depth[static.depth > 0]
     assert len(d) > 100 and np.median(np.abs(d - CAMERA.bf / 8.0)) < 0.05 * CAMERA.bf / 8.0

@@ -92,7 +92,7 @@ class FrameBuilder:
 
     def _densify(self, kp: Keypoints, pyr_l: list[np.ndarray], instances: np.ndarray,
                  objects_px: np.ndarray) -> Keypoints:
-        """`kp` followed by the keypoints of a second ORB pass (objects.densify_*) restricted to the
+        """`kp` followed by the keypoints of one more ORB pass (objects.densify_*) restricted to the
         dynamic-class instances that the first pass gave fewer than densify_below keypoints (small or
         weakly textured objects: the grid distribution over the whole image leaves them a handful), on
         levels 0..densify_max_level, away from the first pass's keypoints (their pixel and its 8
@@ -119,14 +119,21 @@ class FrameBuilder:
             objects_px = dynamic_mask(data.instances)
             dyn = dilate_mask(objects_px, self.config.tracking.mask_dilation_px)
         pyr_l = self.extractor.build_pyramid(to_gray(data.left))
-        # masked: features on dynamic instances are never extracted, the budget goes to the rest (DynaSLAM).
-        mask = ~dyn if (mode == "masked" and dyn is not None) else None
+        # masked: features on dynamic instances are never extracted, the budget goes to the rest (DynaSLAM);
+        # dynamic with objects.n_features: the same, then a pass with its own budget on the instances.
+        separate = mode == "dynamic" and self.config.objects.n_features > 0
+        mask = ~dyn if (dyn is not None and (mode == "masked" or separate)) else None
         use_depth = data.depth is not None and (data.right is None or self.config.tracking.use_depth_image)
         if use_depth:
             kp = self.extractor.extract(pyr_l, mask=mask)
         else:  # left and right concurrently with orb.threads > 1 (ORB-SLAM2 extracts them in two threads)
             pyr_r = self.extractor.build_pyramid(to_gray(data.right))
             kp, kp_r = self.extractor.extract_pair(pyr_l, pyr_r, mask, self.n_features_right)
+        if separate and dyn is not None and objects_px.any():
+            cfg = self.config.objects
+            on_objects = self.extractor.extract(pyr_l, mask=objects_px, n_features=cfg.n_features,
+                                                max_level=cfg.features_max_level)
+            kp = Keypoints.concatenate([kp, on_objects]) if len(on_objects) else kp
         n_first = len(kp)
         if mode == "dynamic" and data.instances is not None and self.config.objects.densify_features > 0:
             kp = self._densify(kp, pyr_l, data.instances, objects_px)
