@@ -94,6 +94,27 @@ def test_constant_velocity_prediction_follows_eq5():
     np.testing.assert_allclose(trk.predicted_pose(tr, 3 * DT), tr.last.T_w_o)
 
 
+def test_constant_velocity_prediction_turns_at_most_max_angular_speed():
+    """objects.max_angular_speed clips the prediction's angular velocity, its axis kept: a body whose last
+    poses turned at 3 rad/s is predicted to turn 1 rad/s x dt about the same axis; uncapped, eq. (5) exactly."""
+    rng = np.random.default_rng(1)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    dT = motion_increment(np.array([0.0, 0.0, 6.0]), np.array([0.0, 3.0, 0.0]), DT)
+    T_true = [make_pose(np.eye(3), np.array([-2.0, 0.5, 14.0]))]
+    for _ in range(2):
+        T_true.append(T_true[-1] @ dT)
+    for cap, rate in ((1e9, 3.0), (1.0, 1.0)):
+        objects, trk = ObjectMap(), tracker("objects.filter=false", f"objects.max_angular_speed={cap}")
+        for i in range(3):
+            trk.track(make_frame(i, [(car, T_true[i])]), None, objects)
+        (tr,) = objects.tracks.values()
+        step = tr.last.T_w_o[:3, :3].T @ trk.predicted_pose(tr, 3 * DT)[:3, :3]
+        angle = np.arccos(np.clip((np.trace(step) - 1.0) / 2.0, -1.0, 1.0))
+        axis = np.array([step[2, 1] - step[1, 2], step[0, 2] - step[2, 0], step[1, 0] - step[0, 1]])
+        assert abs(angle - rate * DT) < 2e-3, (cap, angle)
+        np.testing.assert_allclose(axis / np.linalg.norm(axis), [0.0, 1.0, 0.0], atol=1e-2)
+
+
 def test_position_filter_converges_to_the_constant_velocity_motion():
     """With the tracking filter on, the filtered origin and velocity reach the true motion within a
     few frames of exact observations (the filter starts with an unknown velocity)."""

@@ -128,11 +128,14 @@ class ObjectTracker:
 
     # ------------------------------------------------------------------ pieces
     def predicted_pose(self, track: ObjectTrack, timestamp: float) -> np.ndarray:
-        """T_w_o at `timestamp`: constant velocity (eq. 5) if known, else the last pose."""
+        """T_w_o at `timestamp`: constant velocity (eq. 5) if known, its angular speed clipped to
+        max_angular_speed (axis kept), else the last pose."""
         last = track.last
         if not track.velocity_known:
             return last.T_w_o.copy()
-        return predict_object_pose(last.T_w_o, last.v_o, last.w_o, timestamp - last.timestamp)
+        speed = np.linalg.norm(last.w_o)
+        w_o = last.w_o * (self.cfg.max_angular_speed / speed) if speed > self.cfg.max_angular_speed else last.w_o
+        return predict_object_pose(last.T_w_o, last.v_o, w_o, timestamp - last.timestamp)
 
     def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray,
                       X_o: np.ndarray) -> np.ndarray | None:
