@@ -400,16 +400,17 @@ class ObjectsConfig:
     # up to 0.02 m between runs that differ in the objects alone).
     n_features: int = 600
     features_max_level: int = 3
-    # Not in the paper: a second ORB pass (budget densify_features, 0: off) on the dynamic-class instances that
-    # the first pass gave fewer than densify_below keypoints, on pyramid levels 0..densify_max_level (a
-    # level-7 patch is ~110 px: on a 20 px object it describes the background). At 640x480 the first pass
-    # gives a pedestrian within 30 m a median of 7 keypoints, 3 with depth (sim crossing s0). Off: a coverage
-    # against accuracy trade. On the 8 bench_dynamic sequences (150 fr, 640x480), 500 with
-    # stereo.row_search_instance_mask: TP 0.751 -> 0.824 (pedestrians 0.27 -> 0.39 of their visible frames),
-    # object ATE 0.264 -> 0.353 m, id switches 27 -> 71 (crossing s1 12 -> 37: adjacent pedestrians swap
-    # tracks), mean ego ATE 0.029 -> 0.025 m (traffic s0 0.021 -> 0.040); features + stereo median 74 -> 106
-    # ms per frame (traffic s0, one thread). Most added corners lie on the object's outline (so do most
-    # first-pass ones: the sim's bodies are smoothly textured boxes), where they slide with the background.
+    # Not in the paper: one more ORB pass (budget densify_features, 0: off) on the dynamic-class instances that
+    # the passes before gave fewer than densify_below keypoints, on pyramid levels 0..densify_max_level (a
+    # level-7 patch is ~110 px: on a 20 px object it describes the background). Measured with one pass for the
+    # whole image (n_features=0), which at 640x480 gave a pedestrian within 30 m a median of 7 keypoints, 3 with
+    # depth (sim crossing s0). Off: a coverage against accuracy trade. On the 8 bench_dynamic sequences (150 fr,
+    # 640x480), 500 with stereo.row_search_instance_mask: TP 0.751 -> 0.824 (pedestrians 0.27 -> 0.39 of their
+    # visible frames), object ATE 0.264 -> 0.353 m, id switches 27 -> 71 (crossing s1 12 -> 37: adjacent
+    # pedestrians swap tracks), mean ego ATE 0.029 -> 0.025 m (traffic s0 0.021 -> 0.040); features + stereo
+    # median 74 -> 106 ms per frame (traffic s0, one thread). Most added corners lie on the object's outline (so
+    # do most first-pass ones: the sim's bodies are smoothly textured boxes), where they slide with the
+    # background.
     densify_features: int = 0
     densify_below: int = 30
     densify_max_level: int = 2
