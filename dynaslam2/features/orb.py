@@ -108,8 +108,9 @@ def _open_cells(mask_sum: np.ndarray, scale_xy: np.ndarray, edge: int, w: int, h
     H, W = mask_sum.shape[0] - 1, mask_sum.shape[1] - 1
 
     def level0_range(first: np.ndarray, last: np.ndarray, scale: float, size: int) -> tuple[np.ndarray, np.ndarray]:
-        lo = np.clip(np.rint((first + 0.5) * scale - 0.5), 0, size - 1).astype(np.int64)
-        hi = np.clip(np.rint((last + 0.5) * scale - 0.5), 0, size - 1).astype(np.int64)
+        """[lo, hi) of the level-0 pixels nearest to the level pixels first..last (monotonic in them)."""
+        lo, hi = (np.clip(np.rint(level_to_base(p.astype(np.float64), scale)), 0, size - 1).astype(np.int64)
+                  for p in (first, last))
         return lo, hi + 1
 
     x = edge + np.arange(n_cx) * cw
@@ -117,8 +118,7 @@ def _open_cells(mask_sum: np.ndarray, scale_xy: np.ndarray, edge: int, w: int, h
     u0, u1 = level0_range(x, np.minimum(x + cw, w - edge) - 1, scale_xy[0], W)
     v0, v1 = level0_range(y, np.minimum(y + ch, h - edge) - 1, scale_xy[1], H)
     S = mask_sum
-    count = S[v1[:, None], u1] - S[v0[:, None], u1] - S[v1[:, None], u0] + S[v0[:, None], u0]
-    return count > 0
+    return S[v1[:, None], u1] - S[v0[:, None], u1] - S[v1[:, None], u0] + S[v0[:, None], u0] > 0
 
 
 def level_to_base(xy: np.ndarray, scale_xy: np.ndarray) -> np.ndarray:

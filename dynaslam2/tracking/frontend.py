@@ -93,10 +93,10 @@ class FrameBuilder:
     def _densify(self, kp: Keypoints, pyr_l: list[np.ndarray], instances: np.ndarray,
                  objects_px: np.ndarray) -> Keypoints:
         """`kp` followed by the keypoints of one more ORB pass (objects.densify_*) restricted to the
-        dynamic-class instances that the first pass gave fewer than densify_below keypoints (small or
-        weakly textured objects: the grid distribution over the whole image leaves them a handful), on
-        levels 0..densify_max_level, away from the first pass's keypoints (their pixel and its 8
-        neighbours). `objects_px`: `dynamic_mask` of `instances`."""
+        dynamic-class instances that the passes before gave fewer than densify_below keypoints (small or
+        weakly textured objects: a grid distribution leaves them a handful), on levels
+        0..densify_max_level, away from the keypoints of those passes (their pixel and its 8 neighbours).
+        `objects_px`: `dynamic_mask` of `instances`."""
         col, row = self._pixels(kp)
         ids, counts = np.unique(instances[row, col][objects_px[row, col]], return_counts=True)
         allowed = objects_px & ~np.isin(instances, ids[counts >= self.config.objects.densify_below])
