@@ -95,19 +95,21 @@ def test_extraction_spreads_over_image_unlike_plain_orb(kitti_left):
     assert ours_fine > plain_fine + 0.1, (ours_fine, plain_fine)
 
 
-@pytest.mark.parametrize("masked", [None, "blob", "boxes"])
+@pytest.mark.parametrize("masked", [None, "blob", "hole", "boxes"])
 def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor, masked):
     """The candidates are exactly ORB-SLAM2's rule computed from one FAST pass at min_th_fast: a cell
     keeps its corners scoring >= ini_th_fast, or all its corners where it has none. With a mask, the
-    rule applies to the corners whose nearest level-0 pixel is usable (FAST runs only around the cells
-    that hold one: "boxes", two small usable boxes as the dynamic instances of a frame)."""
+    rule applies to the corners whose nearest level-0 pixel is usable (with the mask's integral image, FAST
+    runs only around the cells that hold one: "hole", the blob as the only usable part; "boxes", two small
+    usable boxes as the dynamic instances of a frame)."""
     cfg = extractor.cfg
     fast = cv2.FastFeatureDetector_create(cfg.min_th_fast, True)
     img0, pyr, _ = kitti_left
     mask = None
-    if masked == "blob":  # a blob of unusable pixels that empties some cells and cuts through others
+    if masked in ("blob", "hole"):  # a blob of unusable pixels that empties some cells and cuts through others
         yy, xx = np.mgrid[0 : img0.shape[0], 0 : img0.shape[1]]
         mask = (xx - 500.0) ** 2 + ((yy - 200.0) * 2.5) ** 2 > 230.0**2
+        mask = ~mask if masked == "hole" else mask
     elif masked == "boxes":
         mask = np.zeros(img0.shape, bool)
         mask[150:230, 301:377] = mask[40:52, 900:907] = True
@@ -133,7 +135,7 @@ def test_detection_equals_orbslam2_per_cell_rule(kitti_left, extractor, masked):
         keep = strong | ~np.isin(cell, cell[strong])
         n_fallback += (~strong & keep).sum()
         expected = {(x, y, s) for (x, y), s in zip(xy[keep].tolist(), score[keep].tolist())}
-        mask_sum = None if mask is None else cv2.integral(mask.view(np.uint8))
+        mask_sum = None if masked in (None, "blob") else cv2.integral(mask.view(np.uint8))
         _, _, got_xy, got_score = extractor._detect(img, scales[level], mask, mask_sum)
         assert {(x, y, s) for (x, y), s in zip(got_xy.tolist(), got_score.tolist())} == expected
     assert n_fallback > 0  # the test covers cells that fall back to min_th_fast
