@@ -93,7 +93,9 @@ class ObjectTrack:
 
     `velocity_known`: v_o/w_o of the last observation come from two close observations, so the
     constant-velocity prediction (eq. 5) applies. `state_mean` (6,) / `state_cov` (6, 6): constant-
-    velocity filter of the object-frame origin (world position, world velocity) at the last observation.
+    velocity filter of the object-frame origin (world position, world velocity) at the last observation;
+    `rot_cov` (6, 6): covariance of the rotation filter (rotation, angular velocity), whose mean is the last
+    observation's rotation and w_o.
     """
 
     track_id: int
@@ -102,6 +104,7 @@ class ObjectTrack:
     velocity_known: bool = False
     state_mean: np.ndarray | None = None
     state_cov: np.ndarray | None = None
+    rot_cov: np.ndarray | None = None
 
     @property
     def last(self) -> ObjectObservation:

@@ -28,7 +28,7 @@ from dynaslam2.config import SlamConfig
 from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import inverse, make_pose, transform
+from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_exp, so3_log, so3_right_jacobian, transform
 from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
@@ -133,9 +133,12 @@ class ObjectTracker:
         last = track.last
         if not track.velocity_known:
             return last.T_w_o.copy()
-        speed = np.linalg.norm(last.w_o)
-        w_o = last.w_o * (self.cfg.max_angular_speed / speed) if speed > self.cfg.max_angular_speed else last.w_o
-        return predict_object_pose(last.T_w_o, last.v_o, w_o, timestamp - last.timestamp)
+        return predict_object_pose(last.T_w_o, last.v_o, self._capped(last.w_o), timestamp - last.timestamp)
+
+    def _capped(self, w_o: np.ndarray) -> np.ndarray:
+        """`w_o` scaled down to max_angular_speed (axis kept) when faster."""
+        speed = np.linalg.norm(w_o)
+        return w_o * (self.cfg.max_angular_speed / speed) if speed > self.cfg.max_angular_speed else w_o
 
     def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray,
                       X_o: np.ndarray) -> np.ndarray | None:
@@ -261,7 +264,7 @@ class ObjectTracker:
         if cfg.filter and track.state_mean is not None and np.isfinite(cfg.gate_nis):
             # Validation gate: a position the filter's prediction cannot explain is an association outlier.
             m, P = self._predict_state(track, dt)
-            R = self._position_noise(self._position_information(frame, objects, T_w_o, kp[inliers], pts[inliers]))
+            R = self._position_noise(self._pose_information(frame, objects, T_w_o, kp[inliers], pts[inliers])[0])
             y = T_w_o[:3, 3] - m[:3]
             if float(y @ np.linalg.solve(P[:3, :3] + R, y)) > cfg.gate_nis:
                 return None
@@ -428,10 +431,12 @@ class ObjectTracker:
             elif not measured:
                 v_o, w_o, known = last.v_o.copy(), last.w_o.copy(), track.velocity_known
         if self.cfg.filter:
-            info = self._position_information(frame, objects, T_w_o, kp, pts) if measured else None
+            info, rot_cov = self._pose_information(frame, objects, T_w_o, kp, pts) if measured else (None, None)
             dt = frame.timestamp - last.timestamp if last is not None else 0.0
-            p_w, v_w = self._filter(track, dt, T_w_o[:3, 3], info)
             T_w_o = T_w_o.copy()
+            if self.cfg.rotation_filter:
+                T_w_o[:3, :3], w_o = self._filter_rotation(track, dt, T_w_o[:3, :3], rot_cov)
+            p_w, v_w = self._filter(track, dt, T_w_o[:3, 3], info)
             T_w_o[:3, 3] = p_w
             v_o = T_w_o[:3, :3].T @ v_w
         box2d = None if not np.all(np.isfinite(box)) else tuple(float(b) for b in box)
@@ -444,24 +449,28 @@ class ObjectTracker:
         P.desc[pts] = frame.keypoints.desc[kp]
         P.n_found[pts] += 1
 
-    def _position_information(self, frame: Frame, objects: ObjectMap, T_w_o: np.ndarray, kp: np.ndarray,
-                              pts: np.ndarray) -> np.ndarray:
-        """(3, 3) information of the object-frame origin (world) from the stereo observations of its
-        points: sum of J^T J / sigma^2 with J = d(u, v, u_right)/d(translation) at each point."""
+    def _pose_information(self, frame: Frame, objects: ObjectMap, T_w_o: np.ndarray, kp: np.ndarray,
+                          pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Precision of a pose-only object pose from the stereo observations of its points (1 px at level 0,
+        scaled by the level): the (3, 3) information of the object-frame origin (world; rotation held), sum
+        of J^T J / sigma^2 with J = d(u, v, u_right)/d(translation), and the (3, 3) covariance of its rotation
+        (object-frame perturbation R Exp(d)), the translation marginalized."""
         T_c_o = frame.T_c_w @ T_w_o
-        X_c = objects.points.X_o[pts] @ T_c_o[:3, :3].T + T_c_o[:3, 3]
+        X_o = objects.points.X_o[pts]
+        X_c = X_o @ T_c_o[:3, :3].T + T_c_o[:3, 3]
         x, y, z = X_c[:, 0], X_c[:, 1], np.maximum(X_c[:, 2], 1e-3)
         cam = self.camera
-        J = np.zeros((len(kp), 3, 3))
+        J = np.zeros((len(kp), 3, 3))  # d(u, v, u_right) / d X_c
         J[:, 0, 0] = J[:, 2, 0] = cam.fx / z
         J[:, 0, 2] = -cam.fx * x / z**2
         J[:, 1, 1] = cam.fy / z
         J[:, 1, 2] = -cam.fy * y / z**2
         J[:, 2, 2] = -(cam.fx * x - cam.bf) / z**2
         J[frame.u_right[kp] < 0, 2, :] = 0.0
-        info_c = np.einsum("n,nki,nkj->ij", self.inv_level_sigma2[frame.keypoints.octave[kp]], J, J)
-        R_w_c = frame.T_w_c[:3, :3]
-        return R_w_c @ info_c @ R_w_c.T
+        R_c_w = frame.T_c_w[:3, :3]
+        J6 = np.concatenate([J @ R_c_w, -J @ T_c_o[:3, :3] @ hat(X_o)], axis=2)  # world translation, rotation
+        info = np.einsum("n,nki,nkj->ij", self.inv_level_sigma2[frame.keypoints.octave[kp]], J6, J6)
+        return info[:3, :3], np.linalg.inv(info + 1e-9 * np.eye(6))[3:, 3:]
 
     def _predict_state(self, track: ObjectTrack, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """(mean (6,), covariance (6, 6)) of the track's filter state predicted `dt` ahead."""
@@ -497,6 +506,37 @@ class ObjectTracker:
             P = P - K @ P[:3, :]
         track.state_mean, track.state_cov = m, 0.5 * (P + P.T)
         return m[:3].copy(), m[3:].copy()
+
+    def _filter_rotation(self, track: ObjectTrack, dt: float, R_meas: np.ndarray,
+                         rot_cov: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Constant-angular-velocity filter of the object rotation (error state d: R = R_mean Exp(d), object
+        frame; white angular acceleration of sigma `angular_accel_sigma`), mean (the last observation's
+        rotation and w_o, so that a BA's write-back restarts it) and covariance `track.rot_cov`: predict over
+        `dt` with the capped w_o (as `predicted_pose`), update with the pose-only rotation `R_meas` of
+        covariance `rot_cov` + rotation_floor_rad^2. `rot_cov` None: `R_meas` is the track's prediction, kept
+        with the last w_o (the covariance is predicted). Returns (rotation, w_o)."""
+        cfg = self.cfg
+        I3 = np.eye(3)
+        R_noise = None if rot_cov is None else rot_cov + cfg.rotation_floor_rad**2 * I3
+        if track.rot_cov is None or not track.observations:
+            R0 = R_noise if R_noise is not None else cfg.rotation_floor_rad**2 * I3
+            track.rot_cov = np.block([[R0, np.zeros((3, 3))],
+                                      [np.zeros((3, 3)), cfg.initial_angular_speed_sigma**2 * I3]])
+            return R_meas, np.zeros(3)
+        last = track.last
+        w = self._capped(last.w_o)
+        F = np.block([[so3_exp(-w * dt), so3_right_jacobian(w * dt) * dt], [np.zeros((3, 3)), I3]])
+        Q = cfg.angular_accel_sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), I3)
+        P = F @ track.rot_cov @ F.T + Q
+        if R_noise is None:
+            track.rot_cov = 0.5 * (P + P.T)
+            return R_meas, last.w_o.copy()
+        R = last.T_w_o[:3, :3] @ so3_exp(w * dt)
+        K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R_noise)
+        d = K @ so3_log(R.T @ R_meas)
+        P = P - K @ P[:3, :]
+        track.rot_cov = 0.5 * (P + P.T)
+        return R @ so3_exp(d[:3]), w + d[3:]
 
     def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                     inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, boxes: np.ndarray,
