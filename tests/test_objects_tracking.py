@@ -634,3 +634,33 @@ def test_ba_write_back_without_object_points_keeps_the_poses():
     X_o, T_w_o, v_o = keep_object_origins(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), T, v, w,
                                           np.array([0, 0]))
     assert X_o.shape == (0, 3) and np.array_equal(T_w_o, T) and np.array_equal(v_o, v)
+
+
+@pytest.mark.parametrize("rotation_filter", [True, False])
+def test_ba_write_back_restarts_the_position_filter_and_keeps_the_rotation_filter(rotation_filter):
+    """The BA's poses replace the observations'; the newest one (the filters' state) takes the BA's position
+    (the position filter restarts from it) but, with the rotation filter, keeps its filtered rotation and turn
+    rate; without it, the BA's."""
+    from dynaslam2.mapping.objects import write_back
+
+    rng = np.random.default_rng(8)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    objects, trk = ObjectMap(), tracker(f"objects.rotation_filter={str(rotation_filter).lower()}")
+    track_alone(trk, objects, car, [make_pose(np.eye(3), np.array([-2.0 + 0.5 * i, 0.5, 14.0])) for i in range(3)])
+    (tr,) = objects.tracks.values()
+    older, newest = tr.observations[-2], tr.observations[-1]
+    R_filter, w_filter = newest.T_w_o[:3, :3].copy(), newest.w_o.copy()
+    T_ba = [make_pose(so3_exp(rng.normal(0, 0.1, 3)), rng.normal(0, 5, 3)) for _ in range(2)]
+    w_ba = rng.normal(0, 0.3, (2, 3))
+    for o, T, w in zip((older, newest), T_ba, w_ba):
+        write_back(tr, o, T, np.ones(3), w)
+    np.testing.assert_allclose(older.T_w_o, T_ba[0], atol=1e-9)
+    np.testing.assert_allclose(older.w_o, w_ba[0])
+    np.testing.assert_allclose(newest.T_w_o[:3, 3], T_ba[1][:3, 3])
+    np.testing.assert_allclose(tr.state_mean[:3], T_ba[1][:3, 3])
+    if rotation_filter:
+        np.testing.assert_allclose(newest.T_w_o[:3, :3], R_filter)
+        np.testing.assert_allclose(newest.w_o, w_filter)
+    else:
+        np.testing.assert_allclose(newest.T_w_o[:3, :3], T_ba[1][:3, :3], atol=1e-9)
+        np.testing.assert_allclose(newest.w_o, w_ba[1])

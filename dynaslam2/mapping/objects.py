@@ -18,7 +18,7 @@ import numpy as np
 from dynaslam2.config import SlamConfig
 from dynaslam2.map.keyframe import KeyFrame
 from dynaslam2.map.map import Map
-from dynaslam2.map.objects import ObjectMap, ObjectObservation
+from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_ba import ObjectBAProblem, object_bundle_adjustment
 from dynaslam2.tracking.camera import rigid
 
@@ -59,6 +59,21 @@ def keep_object_origins(X_o_before: np.ndarray, X_o: np.ndarray, pt_obj: np.ndar
     T_w_o[:, :3, 3] -= np.einsum("fij,fj->fi", T_w_o[:, :3, :3], d)
     v_o -= np.cross(w_o, d)
     return X_o, T_w_o, v_o
+
+
+def write_back(track: ObjectTrack, o: ObjectObservation, T_w_o: np.ndarray, v_o: np.ndarray,
+               w_o: np.ndarray) -> None:
+    """The BA's pose and velocities into observation `o` of `track`. The newest observation is the tracking
+    filters' state: the position filter restarts from the BA's position; the rotation filter (when it runs)
+    keeps its rotation and turn rate, less noisy than the BA's (objects.rotation_filter in config.py)."""
+    newest = o is track.last
+    R_filter, w_filter = o.T_w_o[:3, :3].copy(), o.w_o.copy()
+    o.T_w_o = rigid(T_w_o)
+    o.v_o, o.w_o = v_o.copy(), w_o.copy()
+    if newest and track.state_mean is not None:
+        track.state_mean[:3] = o.T_w_o[:3, 3]
+    if newest and track.rot_cov is not None:
+        o.T_w_o[:3, :3], o.w_o = R_filter, w_filter
 
 
 def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int], camera_weak: bool,
@@ -139,10 +154,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
                                           result.w_o, problem.obj_id)
     P.X_o[obj_pts] = X_o
     for f, (k, o) in enumerate(obs_list):
-        o.T_w_o = rigid(T_w_o[f])
-        o.v_o, o.w_o = v_o[f].copy(), result.w_o[f].copy()
-        if o is tracks[k].last and tracks[k].state_mean is not None:  # the tracking filter restarts from BA
-            tracks[k].state_mean[:3] = o.T_w_o[:3, 3]
+        write_back(tracks[k], o, T_w_o[f], v_o[f], result.w_o[f])
         good = result.obj_inlier[oobs_f == f]
         o.kp_idx, o.pt_ids = o.kp_idx[good], o.pt_ids[good]
     if camera_weak:
