@@ -533,10 +533,10 @@ class ObjectsConfig:
     accel_sigma: float = 1.5
     position_floor_m: float = 0.05
     initial_speed_sigma: float = 10.0
-    # Not in the paper: a constant-angular-velocity filter of each object's rotation (white angular acceleration
-    # angular_accel_sigma rad/s^2; pose-only rotation covariance from its stereo Jacobian, the translation
-    # marginalized, plus rotation_floor_rad; unknown initial turn rate initial_angular_speed_sigma rad/s). The
-    # angular velocity from two consecutive pose-only rotations is mostly noise (see max_angular_speed).
+    # Not in the paper, with `filter`: a constant-angular-velocity filter of each object's rotation (white
+    # angular acceleration angular_accel_sigma rad/s^2; pose-only rotation covariance from its stereo Jacobian,
+    # the translation marginalized, plus rotation_floor_rad; unknown initial turn rate initial_angular_speed_sigma
+    # rad/s). The angular velocity from two consecutive pose-only rotations is mostly noise (see max_angular_speed).
     # bench_dynamic's 20 sequences (traffic, following, crossing, static s0-s4, 150 fr, 640x480), off -> on with
     # angular_accel_sigma 0.5 / 1.0 / 2.0: object RPE_r 4.32 -> 2.24 / 2.35 / 2.49 deg per frame (paper
     # selection 2.48 -> 1.21 / 1.34 / 1.62), object ATE 0.245 -> 0.232 / 0.228 / 0.229 m, TP 0.814 -> 0.817,

@@ -69,16 +69,22 @@ def est_of(estimates, track_id):
     return next(e for e in estimates if e.track_id == track_id)
 
 
+def twist_poses(T0: np.ndarray, v_o: list[float], w_o: list[float], n: int) -> list[np.ndarray]:
+    """`n` poses from `T0` moving with the constant twist (v_o, w_o) of its own frame (eq. 5), DT apart."""
+    dT = motion_increment(np.array(v_o, dtype=float), np.array(w_o, dtype=float), DT)
+    poses = [T0]
+    for _ in range(n - 1):
+        poses.append(poses[-1] @ dT)
+    return poses
+
+
 def test_constant_velocity_prediction_follows_eq5():
     """After two observations the prediction of the next pose is exact for a body moving with a
     constant twist (forward speed and yaw rate) in its own frame."""
     rng = np.random.default_rng(0)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
-    T0 = make_pose(so3_exp(np.array([0.0, 0.3, 0.0])), np.array([-2.0, 0.5, 14.0]))
-    dT = motion_increment(np.array([0.0, 0.0, 6.0]), np.array([0.0, 0.4, 0.0]), DT)
-    T_true = [T0]
-    for _ in range(3):
-        T_true.append(T_true[-1] @ dT)
+    T_true = twist_poses(make_pose(so3_exp(np.array([0.0, 0.3, 0.0])), np.array([-2.0, 0.5, 14.0])),
+                         [0.0, 0.0, 6.0], [0.0, 0.4, 0.0], 4)
     objects, trk = ObjectMap(), tracker("objects.filter=false")
     for i in range(3):
         trk.track(make_frame(i, [(car, T_true[i])]), None, objects)
@@ -99,10 +105,7 @@ def test_constant_velocity_prediction_turns_at_most_max_angular_speed():
     poses turned at 3 rad/s is predicted to turn 1 rad/s x dt about the same axis; uncapped, eq. (5) exactly."""
     rng = np.random.default_rng(1)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
-    dT = motion_increment(np.array([0.0, 0.0, 6.0]), np.array([0.0, 3.0, 0.0]), DT)
-    T_true = [make_pose(np.eye(3), np.array([-2.0, 0.5, 14.0]))]
-    for _ in range(2):
-        T_true.append(T_true[-1] @ dT)
+    T_true = twist_poses(make_pose(np.eye(3), np.array([-2.0, 0.5, 14.0])), [0.0, 0.0, 6.0], [0.0, 3.0, 0.0], 3)
     for cap, rate in ((1e9, 3.0), (1.0, 1.0)):
         objects, trk = ObjectMap(), tracker("objects.filter=false", f"objects.max_angular_speed={cap}")
         for i in range(3):
@@ -145,10 +148,7 @@ def test_rotation_filter_converges_to_the_constant_turn_rate():
     with an unknown turn rate)."""
     rng = np.random.default_rng(5)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
-    dT = motion_increment(np.array([0.0, 0.0, 6.0]), np.array([0.0, 0.4, 0.0]), DT)
-    T_true = [make_pose(np.eye(3), np.array([-2.0, 0.5, 14.0]))]
-    for _ in range(14):
-        T_true.append(T_true[-1] @ dT)
+    T_true = twist_poses(make_pose(np.eye(3), np.array([-2.0, 0.5, 14.0])), [0.0, 0.0, 6.0], [0.0, 0.4, 0.0], 15)
     objects, trk = ObjectMap(), tracker("objects.rotation_filter=true")
     for i, T in enumerate(T_true):
         (e,) = trk.track(make_frame(i, [(car, T)]), None, objects).estimates
