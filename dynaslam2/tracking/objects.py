@@ -115,6 +115,12 @@ def ransac_rigid(A: np.ndarray, B: np.ndarray, hypotheses: int, inlier_m: float,
     return T_best, mask
 
 
+def white_acceleration_noise(sigma: float, dt: float) -> np.ndarray:
+    """(6, 6) process noise of a constant-velocity state (value, rate), 3 axes each, over `dt` under white
+    acceleration of sigma `sigma` (discrete form)."""
+    return sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), np.eye(3))
+
+
 class ObjectTracker:
     """Algorithms of object tracking; the state lives in `ObjectMap` (and the frame)."""
 
@@ -477,7 +483,7 @@ class ObjectTracker:
         I3 = np.eye(3)
         F = np.eye(6)
         F[:3, 3:] = dt * I3
-        Q = self.cfg.accel_sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), I3)
+        Q = white_acceleration_noise(self.cfg.accel_sigma, dt)
         return F @ track.state_mean, F @ track.state_cov @ F.T + Q
 
     def _position_noise(self, info: np.ndarray) -> np.ndarray:
@@ -512,13 +518,14 @@ class ObjectTracker:
         """Constant-angular-velocity filter of the object rotation (error state d: R = R_mean Exp(d), object
         frame; white angular acceleration of sigma `angular_accel_sigma`), mean (the last observation's
         rotation and w_o, so that a BA's write-back restarts it) and covariance `track.rot_cov`: predict over
-        `dt` with the capped w_o (as `predicted_pose`), update with the pose-only rotation `R_meas` of
+        `dt` with the capped w_o (`predicted_pose`'s turn when the track's velocity is known; the filter's own
+        turn rate otherwise), update with the pose-only rotation `R_meas` of
         covariance `rot_cov` + rotation_floor_rad^2. `rot_cov` None: `R_meas` is the track's prediction, kept
         with the last w_o (the covariance is predicted). Returns (rotation, w_o)."""
         cfg = self.cfg
         I3 = np.eye(3)
         R_noise = None if rot_cov is None else rot_cov + cfg.rotation_floor_rad**2 * I3
-        if track.rot_cov is None or not track.observations:
+        if track.rot_cov is None:  # the track's first observation
             R0 = R_noise if R_noise is not None else cfg.rotation_floor_rad**2 * I3
             track.rot_cov = np.block([[R0, np.zeros((3, 3))],
                                       [np.zeros((3, 3)), cfg.initial_angular_speed_sigma**2 * I3]])
@@ -526,8 +533,7 @@ class ObjectTracker:
         last = track.last
         w = self._capped(last.w_o)
         F = np.block([[so3_exp(-w * dt), so3_right_jacobian(w * dt) * dt], [np.zeros((3, 3)), I3]])
-        Q = cfg.angular_accel_sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), I3)
-        P = F @ track.rot_cov @ F.T + Q
+        P = F @ track.rot_cov @ F.T + white_acceleration_noise(cfg.angular_accel_sigma, dt)
         if R_noise is None:
             track.rot_cov = 0.5 * (P + P.T)
             return R_meas, last.w_o.copy()
