@@ -211,7 +211,8 @@ class System:
         self.object_tracker.on_keyframe(frame, kf.id, self.objects, object_weak)
         with_objects = bool(object_weak) and self.config.objects.ba
         static_ba = not with_objects or (camera_weak and self.config.objects.static_ba_first)
-        mapping_ms = self.mapper.process(kf, self.map, static_ba=static_ba)
+        triangulate = camera_weak or self.config.objects.object_keyframe_triangulates
+        mapping_ms = self.mapper.process(kf, self.map, static_ba=static_ba, triangulate=triangulate)
         if with_objects:
             t0 = time.perf_counter()
             object_local_ba(kf, self.map, self.objects, object_weak, camera_weak, self.mapper, self.config)

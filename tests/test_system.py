@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import shutil
+import types
 from pathlib import Path
 
 import numpy as np
@@ -174,3 +175,18 @@ def test_a_crash_mid_sequence_keeps_the_frames_written(tmp_path, capsys):
     assert code == 2 and len(capsys.readouterr().err.strip().splitlines()) == 1
     results = read_results(tmp_path / "res")
     assert len(results) == 3 and results.status[0]["state"] == "init"
+
+
+@pytest.mark.parametrize("override, expected", [([], [True, False]),
+                                                (["objects.object_keyframe_triangulates=true"], [True, True])])
+def test_keyframe_for_an_object_only_triangulates_no_static_points(override, expected):
+    """III-D: a keyframe inserted because an object is weak (the camera is not) adds no new static points
+    from matches with its neighbours, unless objects.object_keyframe_triangulates."""
+    from dynaslam2.optim.synthetic import kitti_like_camera
+    system = System(load_config(None, ["mode=dynamic", "objects.ba=false"] + override), kitti_like_camera())
+    calls = []
+    system.mapper.process = lambda kf, map_, static_ba=True, triangulate=True: calls.append(triangulate) or {}
+    system.object_tracker.on_keyframe = lambda *args: None
+    for camera_weak in (True, False):
+        system._local_mapping(None, types.SimpleNamespace(id=0), camera_weak, [1])
+    assert calls == expected

@@ -135,9 +135,10 @@ class LocalMapper:
         return kf
 
     # ----------------------------------------------------------- local mapping
-    def process(self, kf: KeyFrame, map_: Map, static_ba: bool = True) -> dict[str, float]:
+    def process(self, kf: KeyFrame, map_: Map, static_ba: bool = True, triangulate: bool = True) -> dict[str, float]:
         """Local mapping for a new keyframe; returns a breakdown in ms. `static_ba=False` leaves the
-        BA to the caller (BA with objects, `mapping.objects.object_local_ba`)."""
+        BA to the caller (BA with objects, `mapping.objects.object_local_ba`); `triangulate=False`: no new
+        static points from matches with the neighbours (a keyframe inserted for an object only, III-D)."""
         detail = {}
         t = time.perf_counter()
 
@@ -151,7 +152,8 @@ class LocalMapper:
         map_.update_connections(kf, self.cfg.covisibility_min_weight)
         self.cull_recent_points(kf, map_)
         lap("process")
-        self.triangulate(kf, map_)
+        if triangulate:
+            self.triangulate(kf, map_)
         lap("triangulation")
         self.fuse_neighbours(kf, map_)
         lap("fusion")
