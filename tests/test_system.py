@@ -16,6 +16,7 @@ from dynaslam2.config import load_config
 from dynaslam2.eval.report import evaluate
 from dynaslam2.io.results import read_results
 from dynaslam2.io.sequence import open_sequence
+from dynaslam2.optim.synthetic import kitti_like_camera
 from dynaslam2.runner import run_sequence
 from dynaslam2.system import System
 
@@ -182,7 +183,6 @@ def test_a_crash_mid_sequence_keeps_the_frames_written(tmp_path, capsys):
 def test_keyframe_for_an_object_only_triangulates_no_static_points(override, expected):
     """III-D: a keyframe inserted because an object is weak (the camera is not) adds no new static points
     from matches with its neighbours, unless objects.object_keyframe_triangulates."""
-    from dynaslam2.optim.synthetic import kitti_like_camera
     system = System(load_config(None, ["mode=dynamic", "objects.ba=false"] + override), kitti_like_camera())
     calls = []
     system.mapper.process = lambda kf, map_, static_ba=True, triangulate=True: calls.append(triangulate) or {}

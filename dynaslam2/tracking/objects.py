@@ -519,8 +519,8 @@ class ObjectTracker:
         frame; white angular acceleration of sigma `angular_accel_sigma`), mean (the last observation's
         rotation and w_o, so that a BA's write-back restarts it) and covariance `track.rot_cov`: predict over
         `dt` with the capped w_o (`predicted_pose`'s turn when the track's velocity is known; the filter's own
-        turn rate otherwise), update with the pose-only rotation `R_meas` of
-        covariance `rot_cov` + rotation_floor_rad^2. `rot_cov` None: `R_meas` is the track's prediction, kept
+        turn rate otherwise), update with the pose-only rotation `R_meas` of covariance `rot_cov` +
+        rotation_floor_rad^2. `rot_cov` None: `R_meas` is the track's prediction, kept
         with the last w_o (the covariance is predicted). Returns (rotation, w_o)."""
         cfg = self.cfg
         I3 = np.eye(3)
