@@ -517,14 +517,15 @@ class ObjectsConfig:
     # mean ego ATE (0.0270 against 0.0271 m without), object ATE 0.395 against 0.382 m, median BA per keyframe
     # 157 against 125 ms.
     static_ba_first: bool = False
-    # A keyframe inserted for a weak object only triangulates new static points with its neighbours (True), or
-    # not (False: the paper, III-D, "this key frame would not introduce new static map points"; its close stereo
-    # points are still created, as on every keyframe). With objects.ba the static local BA does not run there, so its
+    # A keyframe inserted for a weak object only triangulates new static points with its neighbours (True), or not
+    # (False: the paper, III-D, "this key frame would not introduce new static map points"; its close stereo points
+    # are still created, as on every keyframe). With objects.ba the static local BA does not run there, so its
     # triangulated points were never refined before the next frames tracked against them. bench_dynamic's 20
-    # sequences (traffic, following, crossing, static s0-s4, 150 fr, 640x480), True -> False: mean ego ATE 0.0247 -> 0.0226 m (within the
-    # run-to-run spread of 0.0218-0.0247 m; dynamic <= masked on 12 -> 16 of 20), camera RPE 0.551 -> 0.536 cm per
-    # frame, object ATE 0.224 -> 0.222 m, TP 0.818 -> 0.816, id switches 48 -> 50 (unoccluded 5 -> 5), median BA per
-    # keyframe 35 -> 32 ms. Without the stereo points too: ego 0.0262 m, camera RPE 0.611 cm per frame (worse).
+    # sequences (traffic, following, crossing, static s0-s4, 150 fr, 640x480), True -> False: mean ego ATE 0.0247 ->
+    # 0.0226 m (within the run-to-run spread of 0.0218-0.0247 m; dynamic <= masked on 12 -> 16 of 20), camera RPE
+    # 0.551 -> 0.536 cm per frame, object ATE 0.224 -> 0.222 m, TP 0.818 -> 0.816, id switches 48 -> 50 (unoccluded
+    # 5 -> 5), median BA per keyframe 35 -> 32 ms. Without the stereo points too: ego 0.0262 m, camera RPE 0.611 cm
+    # per frame (worse).
     object_keyframe_triangulates: bool = False
     # Not in the paper: between BAs, each inlier stereo observation of an object point is averaged
     # into its position in the object frame, weighted by its depth information (1 px disparity at its
