@@ -482,6 +482,29 @@ def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong
     assert e4.track_id == e.track_id and not tr.last.measured
 
 
+def camera_at(z: float) -> np.ndarray:
+    """T_c_w of a camera driven `z` m along the world's +z axis."""
+    return make_pose(np.eye(3), np.array([0.0, 0.0, -float(z)]))
+
+
+def test_box_association_skips_an_object_the_camera_has_passed():
+    """The camera drives past a parked car; 0.6 s after its last view (within join_max_gap_s) a second
+    parked car appears where the first one was last seen in the image. The first car is predicted
+    behind the camera, so its last box as it was cannot take the new instance: the second car starts
+    its own track (static s4: a parked car leaving the image took the track of one passed 0.8 s before)."""
+    rng = np.random.default_rng(14)
+    first, second = Body(rng, 1001, 80, (1.8, 1.5, 4.0)), Body(rng, 1002, 80, (1.8, 1.5, 4.0))
+    objects, trk = ObjectMap(), tracker()
+    T_first = make_pose(np.eye(3), np.array([3.0, 0.8, 8.0]))
+    for i in range(4):
+        (e,) = trk.track(make_frame(i, [(first, T_first)], camera_at(i)), None, objects).estimates
+    T_second = T_first @ make_pose(np.eye(3), np.array([0.0, 0.0, 12.0]))  # 5 m ahead at frame 9, as the first at 3
+    frame = make_frame(9, [(second, T_second)], camera_at(12))
+    tr = objects.tracks[e.track_id]
+    X_o = objects.points.X_o[tr.last.pt_ids]
+    assert trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), X_o) is None
+    ids = [x.track_id for x in trk.track(frame, None, objects).estimates]
+    assert len(ids) == 1 and ids[0] != e.track_id
 
 @pytest.mark.parametrize("register", [True, False])
 def test_box_association_registers_the_prediction_on_matched_points(register):

@@ -153,13 +153,17 @@ class ObjectTracker:
         (object frame; those of the last observation) from the last pose and camera to the predicted
         pose and this camera, and scales by the median ratio of their depths (an approaching object's
         box grows; a turn that changes its outline does not count). With fewer than 3 of the points in
-        front of both cameras the object-frame origin moves it; the last box as it was when neither can."""
+        front of both cameras the object-frame origin moves it; the last box as it was when neither can.
+        None without a last box, or when the points and the origin are all predicted behind this camera
+        (a passed object: its last box as it was would take the instance of the object now there)."""
         last = track.last
         if last.box2d is None:
             return None
         box = np.asarray(last.box2d, dtype=float)
         motion = None
         if last.T_c_w is not None:
+            if not np.any(transform(frame.T_c_w @ T_w_o_pred, np.vstack([X_o, np.zeros((1, 3))]))[:, 2] > 1e-3):
+                return None
             motion = self._image_motion(track, frame, T_w_o_pred, X_o, 3)
             if motion is None:
                 motion = self._image_motion(track, frame, T_w_o_pred, np.zeros((1, 3)), 1)
@@ -654,18 +658,20 @@ class ObjectTracker:
 
     def _join_by_box(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                      box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
-        """The unseen track measured within `max_gap_s` whose last box, as it was or moved by its
-        predicted image motion (wrong when the velocity is, or for a near object whose origin projects
-        off its visible part), overlaps `box` most, if that IoU is >= join_iou and no box of the frame's
-        instances that can still join a track (`boxes`) overlaps that track more (instance-to-instance
-        association, III-B)."""
+        """The unseen track measured within `max_gap_s` and with a predicted box (`predicted_box`: not
+        passed behind the camera) whose last box, as it was or moved by its predicted image motion (wrong
+        when the velocity is, or for a near object whose origin projects off its visible part), overlaps
+        `box` most, if that IoU is >= join_iou and no box of the frame's instances that can still join a
+        track (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
         cfg = self.cfg
-        recent = [tr for tr in unseen if tr.last.box2d is not None
-                  and frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
-        if not recent or not np.all(np.isfinite(box)):
+        if not np.all(np.isfinite(box)):
             return None
-        moved = np.array([self.predicted_box(tr, frame, pred[tr.track_id], objects.points.X_o[tr.last.pt_ids])
-                          for tr in recent])
+        recent = [tr for tr in unseen if frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
+        moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects.points.X_o[tr.last.pt_ids]) for tr in recent]
+        recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
+        if not recent:
+            return None
+        moved = np.array(moved)
         last = np.array([tr.last.box2d for tr in recent], dtype=float)
         iou = np.maximum(box_iou(np.array([box]), moved)[0], box_iou(np.array([box]), last)[0])
         b = int(np.argmax(iou))
