@@ -13,6 +13,7 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse
 from dynaslam2.io.types import FrameData, ObjectEstimate
 from dynaslam2.map.frame import Frame
+from dynaslam2.map.keyframe import KeyFrame
 from dynaslam2.map.map import Map
 from dynaslam2.map.objects import ObjectMap
 from dynaslam2.mapping.objects import object_local_ba
@@ -76,6 +77,10 @@ class System:
         self.last_T_c_r: np.ndarray | None = None
         self.last_ref_id: int | None = None
         self.last_kf_index = -1
+        # Newest keyframe inserted for the camera (not only for an object) and its frame index: the
+        # camera's keyframe decision ignores object-only keyframes (`_camera_reference`).
+        self.camera_kf_id: int | None = None
+        self.last_camera_kf_index = -1
         self.last_reloc_index = -(10**9)
         self.n_lost = 0
         self.n_frames = 0
@@ -108,8 +113,8 @@ class System:
         # Every point with depth becomes a map point at initialization (new_points_min = all).
         kf = self.mapper.create_keyframe(frame, self.map, new_points_min=len(frame))
         self.map.update_point_descriptors_and_normals(kf.point_ids[kf.matched()], self.mapper.scale_factors)
-        self.ref_kf_id = kf.id
-        self.last_kf_index = frame.index
+        self.ref_kf_id = self.camera_kf_id = kf.id
+        self.last_kf_index = self.last_camera_kf_index = frame.index
         self.initialized = True
         return True
 
@@ -145,20 +150,23 @@ class System:
             ok, state, n_inliers = self._track(frame, T_pred)
             if ok:
                 object_weak = self._track_objects(frame, data, timing)
-                ref = self.map.keyframes.get(self.ref_kf_id)
+                ref = self._camera_reference()
                 camera_weak = ref is not None and self.tracker.need_new_keyframe(
-                    frame, self.map, ref, n_inliers, frame.index - self.last_kf_index,
+                    frame, self.map, ref, n_inliers, frame.index - self.last_camera_kf_index,
                     frame.index - self.last_reloc_index)
                 object_weak = [] if frame.index - self.last_kf_index < self.config.objects.kf_min_frames \
                     else object_weak
                 if camera_weak or object_weak:
                     kf = self.mapper.create_keyframe(frame, self.map, cfg.new_points_min)
+                    kf.object_only = not camera_weak
                     t_map = time.perf_counter()
                     timing["tracking"] = (t_map - t_track) * 1e3 - timing["objects"]
                     mapping_ms = self._local_mapping(frame, kf, camera_weak, object_weak)
                     timing["local_ba"] = (time.perf_counter() - t_map) * 1e3
                     self.ref_kf_id = kf.id
                     self.last_kf_index = frame.index
+                    if camera_weak:
+                        self.camera_kf_id, self.last_camera_kf_index = kf.id, frame.index
                     keyframe = True
             else:
                 self.n_lost += 1
@@ -200,6 +208,17 @@ class System:
         weak = self.object_tracker.track(frame, data.instances, self.objects).weak
         timing["objects"] = (time.perf_counter() - t0) * 1e3
         return weak
+
+    def _camera_reference(self) -> KeyFrame | None:
+        """Reference keyframe of the camera's keyframe decision (ORB-SLAM2's NeedNewKeyFrame, paper III-D
+        reason (a)): the tracking reference keyframe, or when that was inserted only for an object, the newest
+        keyframe inserted for the camera (if still in the map). An object-only keyframe adds no static points
+        and no static BA; as the reference it reset the decision (its tracked points are the frame's), so that
+        the camera asked for keyframes, and the static map for refinement, less often than in `masked` mode."""
+        ref = self.map.keyframes.get(self.ref_kf_id) if self.ref_kf_id is not None else None
+        if ref is not None and ref.object_only:
+            return self.map.keyframes.get(self.camera_kf_id, ref)
+        return ref
 
     def _local_mapping(self, frame: Frame, kf, camera_weak: bool, object_weak: list[int]) -> dict[str, float]:
         """Local mapping of a new keyframe with the BA case of III-D: camera weak only -> the static

@@ -164,3 +164,14 @@ def test_densify_adds_keypoints_only_on_sparse_dynamic_instances(run):
         gained += sum(np.count_nonzero((b.instance_id == k) & (b.depth > 0))
                       - np.count_nonzero((a.instance_id == k) & (a.depth > 0)) for k in sparse)
     assert added > 0 and gained > 0, (added, gained)
+
+
+def test_object_only_keyframes_are_marked(run):
+    """Keyframes inserted only for a weak object are marked (III-D), and the newest camera keyframe, the
+    reference of the camera's keyframe decision after them, is the newest unmarked one."""
+    _, _, system = run
+    kfs = system.map.keyframes
+    assert any(kf.object_only for kf in kfs.values()) and not kfs[min(kfs)].object_only
+    camera = [k for k, kf in kfs.items() if not kf.object_only]
+    assert system.camera_kf_id >= max(camera)
+    assert system.camera_kf_id not in kfs or not kfs[system.camera_kf_id].object_only

@@ -190,3 +190,20 @@ def test_keyframe_for_an_object_only_triangulates_no_static_points(override, exp
     for camera_weak in (True, False):
         system._local_mapping(None, types.SimpleNamespace(id=0), camera_weak, [1])
     assert calls == expected
+
+
+def test_camera_keyframe_decision_ignores_object_only_keyframes():
+    """III-D reason (a) is ORB-SLAM2's decision on the static map: its reference is the tracking reference
+    keyframe unless that one was inserted only for an object; then the newest camera keyframe (while it is in
+    the map). In `masked` and `static` modes every keyframe is a camera keyframe: ORB-SLAM2's reference."""
+    system = System(load_config(None, ["mode=dynamic"]), kitti_like_camera())
+    camera_kf, object_kf = types.SimpleNamespace(object_only=False), types.SimpleNamespace(object_only=True)
+    system.map.keyframes.update({3: camera_kf, 4: object_kf})
+    system.camera_kf_id = 3
+    system.ref_kf_id = 4
+    assert system._camera_reference() is camera_kf
+    system.ref_kf_id = 3
+    assert system._camera_reference() is camera_kf
+    del system.map.keyframes[3]  # culled: the reference keyframe itself
+    system.ref_kf_id = 4
+    assert system._camera_reference() is object_kf

@@ -32,6 +32,7 @@ class KeyFrame(StereoView):
     obs_row: np.ndarray = field(default=None)
     bad: bool = False
     segment: int = 0
+    object_only: bool = False  # inserted only because an object's tracking was weak (paper III-D)
 
     def __post_init__(self) -> None:
         n = len(self.keypoints)
