@@ -175,3 +175,23 @@ def test_object_only_keyframes_are_marked(run):
     camera = [k for k, kf in kfs.items() if not kf.object_only]
     assert system.camera_kf_id >= max(camera)
     assert system.camera_kf_id not in kfs or not kfs[system.camera_kf_id].object_only
+
+
+def test_two_dynamic_runs_give_identical_estimates(run):
+    """Determinism of the `dynamic` mode: the same sequence gives the same camera poses and the same objects
+    (track ids, poses, velocities) in two runs of fresh systems (RANSAC seeds come from frame and track ids)."""
+    from dynaslam2.config import load_config
+    from dynaslam2.system import System
+
+    seq = open_sequence(run[0])
+    outputs = []
+    for _ in range(2):
+        system = System(load_config(None, ["mode=dynamic"]), seq.camera)
+        estimates = [system.process(seq[i]) for i in range(15)]
+        outputs.append(([e.T_w_c for e in estimates],
+                         [(o.track_id, o.T_w_o, o.v_w, o.w_w) for e in estimates for o in e.objects]))
+    (poses_a, objects_a), (poses_b, objects_b) = outputs
+    assert np.array_equal(np.array(poses_a), np.array(poses_b))
+    assert len(objects_a) == len(objects_b) > 0
+    for a, b in zip(objects_a, objects_b):
+        assert a[0] == b[0] and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a[1:], b[1:]))
