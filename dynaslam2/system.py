@@ -213,8 +213,9 @@ class System:
         """Reference keyframe of the camera's keyframe decision (ORB-SLAM2's NeedNewKeyFrame, paper III-D
         reason (a)): the tracking reference keyframe, or when that was inserted only for an object, the newest
         keyframe inserted for the camera (if still in the map). An object-only keyframe adds no static points
-        and no static BA; as the reference it reset the decision (its tracked points are the frame's), so that
-        the camera asked for keyframes, and the static map for refinement, less often than in `masked` mode."""
+        from its neighbours and, with the BA with objects, no static BA (III-D); as the reference it reset the
+        decision (its tracked points are the frame's), so that the camera asked for keyframes, and the static
+        map for refinement, less often than in `masked` mode."""
         ref = self.map.keyframes.get(self.ref_kf_id) if self.ref_kf_id is not None else None
         if ref is not None and ref.object_only:
             return self.map.keyframes.get(self.camera_kf_id, ref)
