@@ -6,6 +6,10 @@ every listed object within 30 m (eval's defaults), and the paper's Table IV sele
 
     python benchmarks/bench_dynamic.py [--scenarios traffic crossing following static] [--seeds 0 1]
         [--frames 150] [--size 640x480] [--modes static masked dynamic] [--work DIR] [--set k=v ...]
+        [--sim-set k=v ...]
+
+--set overrides the SLAM config, --sim-set the scenario (sim.scenarios.ScenarioConfig): e.g. KITTI's
+camera geometry is `--size 1242x375 --sim-set fx=721.5` (baseline 0.54 m is the default).
 
 Sequences are generated once into --work (default /tmp/bench_dynamic) and reused. For each sequence
 the modes run one after the other on frames loaded beforehand (disk reads are not SLAM time); fps =
@@ -28,14 +32,18 @@ from dynaslam2.io.sequence import open_sequence
 from dynaslam2.system import System
 
 
-def ensure_sequence(work: Path, scenario: str, seed: int, frames: int, size: str) -> Path:
-    out = work / f"{scenario}_s{seed}_{frames}_{size}"
+def ensure_sequence(work: Path, scenario: str, seed: int, frames: int, size: str,
+                    sim_overrides: tuple[str, ...] = ()) -> Path:
+    """The sequence's folder under `work`, generated on first use; scenario overrides (`sim_overrides`,
+    e.g. "fx=721.5") are part of its name, so each camera or world variant is cached apart."""
+    suffix = "".join("_" + "".join(c if c.isalnum() or c in ".-" else "-" for c in o) for o in sim_overrides)
+    out = work / f"{scenario}_s{seed}_{frames}_{size}{suffix}"
     if not (out / "meta.json").exists():
         os.environ.setdefault("MUJOCO_GL", "egl")
         from sim.generate import generate_sequence
         from sim.scenarios import load_scenario
 
-        cfg = load_scenario(scenario, [f"seed={seed}", f"frames={frames}", f"image_size={size}"])
+        cfg = load_scenario(scenario, [f"seed={seed}", f"frames={frames}", f"image_size={size}", *sim_overrides])
         generate_sequence(cfg, out, overwrite=True, preview=False, progress=False)
     return out
 
@@ -76,6 +84,7 @@ def main() -> None:
     ap.add_argument("--modes", nargs="+", default=["static", "masked", "dynamic"])
     ap.add_argument("--work", type=Path, default=Path("/tmp/bench_dynamic"))
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--sim-set", dest="sim_overrides", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     modes = args.modes
@@ -86,7 +95,7 @@ def main() -> None:
     rows = []
     for scenario in args.scenarios:
         for seed in args.seeds:
-            seq_path = ensure_sequence(args.work, scenario, seed, args.frames, args.size)
+            seq_path = ensure_sequence(args.work, scenario, seed, args.frames, args.size, tuple(args.sim_overrides))
             seq = open_sequence(seq_path)
             data = [seq[i] for i in range(len(seq))]
             r = {m: run_mode(seq, data, m, args.overrides) for m in modes}
