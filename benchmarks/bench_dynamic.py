@@ -26,10 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from dynaslam2.config import load_config
+from dynaslam2.errors import InputError
 from dynaslam2.eval.objects import PAPER_PROTOCOL, evaluate_objects
 from dynaslam2.eval.trajectory import ate
 from dynaslam2.io.sequence import open_sequence
 from dynaslam2.system import System
+from sim.scenarios import load_scenario
 
 
 def ensure_sequence(work: Path, scenario: str, seed: int, frames: int, size: str,
@@ -41,7 +43,6 @@ def ensure_sequence(work: Path, scenario: str, seed: int, frames: int, size: str
     if not (out / "meta.json").exists():
         os.environ.setdefault("MUJOCO_GL", "egl")
         from sim.generate import generate_sequence
-        from sim.scenarios import load_scenario
 
         cfg = load_scenario(scenario, [f"seed={seed}", f"frames={frames}", f"image_size={size}", *sim_overrides])
         generate_sequence(cfg, out, overwrite=True, preview=False, progress=False)
@@ -86,6 +87,12 @@ def main() -> None:
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--sim-set", dest="sim_overrides", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
+    try:  # bad keys or values: one line before any sequence is made
+        load_config(None, args.overrides)
+        for scenario in args.scenarios:
+            load_scenario(scenario, [f"frames={args.frames}", f"image_size={args.size}", *args.sim_overrides])
+    except InputError as e:
+        ap.error(str(e))
     args.work.mkdir(parents=True, exist_ok=True)
     modes = args.modes
     head = (["scenario", "seed"] + [f"ATE {m[:3]}" for m in modes]
