@@ -11,7 +11,9 @@ import pytest
 from dynaslam2.classes import CLASS_IDS
 from dynaslam2.cli import main
 from dynaslam2.errors import InputError
-from dynaslam2.eval.objects import PAPER_PROTOCOL, ObjectEvalConfig, box_iou, evaluate_object_tracks, evaluate_objects, track_errors
+from dynaslam2.eval.objects import (
+    PAPER_PROTOCOL, UNOCCLUDED_PROTOCOL, ObjectEvalConfig, box_iou, evaluate_object_tracks, evaluate_objects, track_errors,
+)
 from dynaslam2.eval.report import evaluate, format_table
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, make_pose, se3_exp, so3_exp
@@ -182,6 +184,31 @@ def test_id_switch_reid_after_occlusion_missing_track_and_range():
     wide = evaluate_scene(scene, est, T_w_c_est, max_range_m=60.0, min_visible_frames=5)
     assert set(wide["per_track"]) == {"1", "2", "3", "4", "5"}
     assert wide["per_track"]["4"]["tp_ratio"] == 1.0 and wide["per_track"]["5"]["matched_est_id"] == 50
+
+
+def test_short_gaps_count_occlusions_of_at_most_one_second_tracked_at_both_ends():
+    """Issue 4: "an object that is occluded for <= 1 s keeps its track id". A gap is a run of frames where the
+    GT is not eligible (hidden; with UNOCCLUDED_PROTOCOL also listed but occluded) between two eligible ones."""
+    n = 40
+    hidden = {1: [*range(10, 15), *range(30, 34)], 2: range(10, 15), 3: range(5, 20)}
+    scene = Scene(n, three_cars(n), hidden)
+    for i in range(25, 30):  # car 2 listed but partly occluded (KITTI level 1)
+        scene.gt[i] = [dataclasses.replace(g, occlusion=1) if g.track_id == 2 else g for g in scene.gt[i]]
+    assignment = {
+        1: {i: 10 for i in range(n) if i not in hidden[1] and i != 34},  # 0.6 s gap kept; 0.5 s gap untracked at f34
+        2: {i: 20 if i < 10 else 21 for i in range(n) if i not in hidden[2]},  # 0.6 s gap, new id after it
+        3: {i: 30 if i < 5 else 31 for i in range(n) if i not in hidden[3]},  # 1.6 s gap: not a short one
+    }
+    est, T_w_c_est = scene.estimate(assignment)
+    m = evaluate_scene(scene, est, T_w_c_est)
+    rows = m["per_track"]
+    assert [(rows[k]["short_gaps"], rows[k]["short_gaps_kept"]) for k in "123"] == [(1, 1), (1, 0), (0, 0)]
+    assert rows["3"]["reid_switches"] == 1 and rows["3"]["max_gap_s"] == pytest.approx(1.6)
+    assert (m["short_gaps"], m["short_gaps_kept"]) == (2, 1)
+    u = evaluate_object_tracks(scene.gt, scene.T_w_c, scene.times, est, T_w_c_est, UNOCCLUDED_PROTOCOL)
+    assert (u["per_track"]["2"]["short_gaps"], u["per_track"]["2"]["short_gaps_kept"]) == (2, 1)
+    assert (u["short_gaps"], u["short_gaps_kept"]) == (3, 2) and u["id_switches"] == 0
+    assert evaluate_scene(scene, est, T_w_c_est, short_gap_s=0.5)["short_gaps"] == 0
 
 
 def test_paper_protocol_scores_only_unoccluded_untruncated_frames_at_least_40_px_high():

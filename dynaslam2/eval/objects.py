@@ -33,10 +33,17 @@ Definitions (parameters in ObjectEvalConfig):
   frame in between; reid_switches: it changes across frames where the GT was not eligible (occluded,
   out of view or beyond range). max_gap_s: the longest time between two consecutive visible frames of
   the track that are not adjacent (0 when it is visible in one run).
+- short_gaps: the gaps of at most `short_gap_s` between two consecutive visible frames that are not
+  adjacent and where some estimate overlaps the GT at both ends; short_gaps_kept: those where the best
+  overlapping estimate is the same at both ends (issue 4: "an object that is occluded for <= 1 s keeps its
+  track id"; with `UNOCCLUDED_PROTOCOL` a gap is a run of frames where the object is occluded, hidden
+  or beyond range).
 - per_track.<gt_id>: ate_m, ate_cam_m, rpe_t, rpe_r, tp_ratio, matched_est_id, visible_frames,
-  matched_frames, offset_m (|d|), id_switches, reid_switches, max_gap_s (null where undefined).
+  matched_frames, offset_m (|d|), id_switches, reid_switches, max_gap_s, short_gaps, short_gaps_kept
+  (null where undefined).
 - Totals: ate_rmse_m, ate_cam_rmse_m, rpe_*: means over the matched tracks (rpe over those with a
-  pair); tp_ratio: mean over the scored GT tracks; id_switches, reid_switches: sums.
+  pair); tp_ratio: mean over the scored GT tracks; id_switches, reid_switches, short_gaps,
+  short_gaps_kept: sums.
 """
 
 from __future__ import annotations
@@ -67,10 +74,14 @@ class ObjectEvalConfig:
     min_box_height_px: float = 0.0
     max_occlusion: int = 3  # KITTI levels: 0 fully visible, 1 partly, 2 largely occluded, 3 unknown
     max_truncation: float = 1.0
+    short_gap_s: float = 1.0  # issue 4: an object occluded for <= 1 s keeps its id
 
 
 # Paper IV-B (Table IV): objects neither occluded nor truncated and at least 40 px high (within 30 m here).
 PAPER_PROTOCOL = ObjectEvalConfig(min_box_height_px=40.0, max_occlusion=0, max_truncation=0.0)
+# Issue 4's id criteria: no id switch while the object is unoccluded (KITTI occlusion level 0, within 30 m,
+# truncated or not), and the same id across occlusions of <= 1 s (short_gaps_kept / short_gaps).
+UNOCCLUDED_PROTOCOL = ObjectEvalConfig(max_occlusion=0)
 
 
 def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
@@ -227,7 +238,8 @@ def evaluate_object_tracks(
                        rpe_t=world["rpe_t"], rpe_r=world["rpe_r"], tp_ratio=len(mf) / len(frames),
                        matched_frames=int(len(mf)), offset_m=float(np.linalg.norm(world["T_off"][:3, 3])))
             matched_rows.append(row)
-        row.update(_switches(frames, [best.get((gid, f)) for f in frames], np.asarray(timestamps, dtype=float)))
+        row.update(_switches(frames, [best.get((gid, f)) for f in frames], np.asarray(timestamps, dtype=float),
+                               config.short_gap_s))
         per_track[str(gid)] = row
 
     def mean(key: str) -> float | None:
@@ -246,12 +258,14 @@ def evaluate_object_tracks(
         "est_tracks": len({e.track_id for frame in est_objects for e in frame}),
         "id_switches": sum(r["id_switches"] for r in rows),
         "reid_switches": sum(r["reid_switches"] for r in rows),
+        "short_gaps": sum(r["short_gaps"] for r in rows),
+        "short_gaps_kept": sum(r["short_gaps_kept"] for r in rows),
         "per_track": per_track,
     }
 
 
-def _switches(frames: np.ndarray, assigned: list[int | None], timestamps: np.ndarray) -> dict:
-    """id_switches / reid_switches / max_gap_s of one GT track (module docstring)."""
+def _switches(frames: np.ndarray, assigned: list[int | None], timestamps: np.ndarray, short_gap_s: float) -> dict:
+    """id_switches / reid_switches / max_gap_s / short_gaps / short_gaps_kept of one GT track (module docstring)."""
     position = {int(f): k for k, f in enumerate(frames)}  # rank among the track's eligible frames
     tracked = [(int(f), a) for f, a in zip(frames, assigned) if a is not None]
     id_switches = reid_switches = 0
@@ -261,8 +275,12 @@ def _switches(frames: np.ndarray, assigned: list[int | None], timestamps: np.nda
                 id_switches += 1
             else:
                 reid_switches += 1
-    gaps = [timestamps[f2] - timestamps[f1] for f1, f2 in zip(frames[:-1], frames[1:]) if f2 > f1 + 1]
-    return {"id_switches": id_switches, "reid_switches": reid_switches, "max_gap_s": float(max(gaps, default=0.0))}
+    ends = zip(frames[:-1], frames[1:], assigned[:-1], assigned[1:])
+    gaps = [(timestamps[f2] - timestamps[f1], a1, a2) for f1, f2, a1, a2 in ends if f2 > f1 + 1]
+    short = [(a1, a2) for dt, a1, a2 in gaps if dt <= short_gap_s + 1e-9 and a1 is not None and a2 is not None]
+    return {"id_switches": id_switches, "reid_switches": reid_switches,
+            "max_gap_s": float(max((dt for dt, _, _ in gaps), default=0.0)),
+            "short_gaps": len(short), "short_gaps_kept": sum(a1 == a2 for a1, a2 in short)}
 
 
 def evaluate_objects(seq: Sequence, est_objects: list[list[ObjectEstimate]], T_w_c_est: np.ndarray,
