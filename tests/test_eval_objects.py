@@ -12,7 +12,8 @@ from dynaslam2.classes import CLASS_IDS
 from dynaslam2.cli import main
 from dynaslam2.errors import InputError
 from dynaslam2.eval.objects import (
-    PAPER_PROTOCOL, UNOCCLUDED_PROTOCOL, ObjectEvalConfig, box_iou, evaluate_object_tracks, evaluate_objects, track_errors,
+    PAPER_PROTOCOL, UNOCCLUDED_PROTOCOL, ObjectEvalConfig, box_iou, evaluate_object_tracks, evaluate_objects,
+    track_errors,
 )
 from dynaslam2.eval.report import evaluate, format_table
 from dynaslam2.geometry.camera import StereoCamera
