@@ -65,14 +65,15 @@ def run_mode(seq, data: list, mode: str, overrides: list[str]) -> dict:
         "objects_ms": float(np.median([e.timing_ms["objects"] for e in estimates])),
     }
     if mode == "dynamic":
-        m = evaluate_objects(seq, [e.objects for e in estimates], T) if len(data) == len(seq) else None
+        objects = [e.objects for e in estimates]
+        m = evaluate_objects(seq, objects, T) if len(data) == len(seq) else None
         if m is not None:
             out.update(obj_ate=m["ate_rmse_m"], obj_ate_cam=m["ate_cam_rmse_m"], tp=m["tp_ratio"],
                        id_sw=m["id_switches"], reid_sw=m["reid_switches"], gt_tracks=m["gt_tracks"])
-            p = evaluate_objects(seq, [e.objects for e in estimates], T, PAPER_PROTOCOL)
+            p = evaluate_objects(seq, objects, T, PAPER_PROTOCOL)
             out.update(p_obj_ate=p["ate_rmse_m"], p_tp=p["tp_ratio"], p_id_sw=p["id_switches"],
                        p_gt_tracks=p["gt_tracks"])
-            u = evaluate_objects(seq, [e.objects for e in estimates], T, UNOCCLUDED_PROTOCOL)
+            u = evaluate_objects(seq, objects, T, UNOCCLUDED_PROTOCOL)
             out.update(u_id_sw=u["id_switches"], gaps=u["short_gaps"], gaps_kept=u["short_gaps_kept"])
     return out
 

@@ -239,7 +239,7 @@ def evaluate_object_tracks(
                        matched_frames=int(len(mf)), offset_m=float(np.linalg.norm(world["T_off"][:3, 3])))
             matched_rows.append(row)
         row.update(_switches(frames, [best.get((gid, f)) for f in frames], np.asarray(timestamps, dtype=float),
-                               config.short_gap_s))
+                             config.short_gap_s))
         per_track[str(gid)] = row
 
     def mean(key: str) -> float | None:
