@@ -537,6 +537,30 @@ def test_box_association_registers_the_prediction_on_matched_points(register):
         assert min(errors) > 1.0, errors
 
 
+def test_box_association_reanchors_a_track_whose_prediction_ran_off():
+    """A car tracked at 15 m whose track ran off to 30 m along the viewing ray (as pose-only estimates from a
+    few monocular matches did on an occluded car, sim following s15) re-appears with a new appearance and joins
+    its track by box IoU. Its points would lie 15 m from the track's: the track is moved onto them (velocity
+    forgotten), so the points added sit on the body and the next frames are right, with one id."""
+    rng = np.random.default_rng(16)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * i, 0.8, 15.0])) for i in range(8)]
+    objects, trk = ObjectMap(), tracker()
+    e = track_alone(trk, objects, car, T_car[:4])
+    tr = objects.tracks[e.track_id]
+    T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
+    tr.last.T_w_o[:3, 3] *= 2.0  # the camera is at the world origin: twice as far along the ray
+    tr.state_mean[:3] = tr.last.T_w_o[:3, 3]
+    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    errors = []
+    for i in range(4, 8):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+        assert e.track_id == tr.track_id
+        errors.append(np.linalg.norm(e.T_w_o[:3, 3] - (T_car[i] @ T_off)[:3, 3]))
+    assert not tr.observations[4].measured and tr.observations[5].measured
+    assert max(errors) < 0.05, errors
+
+
 @pytest.mark.parametrize("gate", [16.27, float("inf")])
 def test_validation_gate_rejects_an_association_outlier(gate):
     """Frame 8 shows the car's keypoints 1.5 m deeper than its constant-velocity motion allows (a wrong
