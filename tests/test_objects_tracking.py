@@ -537,6 +537,19 @@ def test_box_association_registers_the_prediction_on_matched_points(register):
         assert min(errors) > 1.0, errors
 
 
+def test_tracks_are_reported_from_their_min_observations_th_observation_on():
+    """estimates(min_observations=2): a track is output from its second observation on, and a later query of
+    the frame of its first observation still leaves it out (the output is the same whenever it is read)."""
+    rng = np.random.default_rng(17)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    objects, trk = ObjectMap(), tracker()
+    for i in range(3):
+        trk.track(make_frame(i, [(car, make_pose(np.eye(3), np.array([0.3 * i, 0.8, 15.0])))]), None, objects)
+        assert [len(trk.estimates(objects, i, m)) for m in (1, 2, 3)] == [1, int(i >= 1), int(i >= 2)]
+    assert [len(trk.estimates(objects, 0, m)) for m in (1, 2)] == [1, 0]
+    assert [len(trk.estimates(objects, 1, m)) for m in (2, 3)] == [1, 0]
+
+
 def test_box_association_reanchors_a_track_whose_prediction_ran_off():
     """A car tracked at 15 m whose track ran off to 30 m along the viewing ray (as pose-only estimates from a
     few monocular matches did on an occluded car, sim following s15) re-appears with a new appearance and joins

@@ -714,13 +714,15 @@ class ObjectTracker:
         P.alive[pts[bad]] = False
 
     @staticmethod
-    def estimates(objects: ObjectMap, frame_index: int) -> list[ObjectEstimate]:
-        """Output of the objects observed at `frame_index` (world-frame velocities), by track id."""
+    def estimates(objects: ObjectMap, frame_index: int, min_observations: int = 1) -> list[ObjectEstimate]:
+        """Output of the objects observed at `frame_index` (world-frame velocities), by track id: those whose
+        track had at least `min_observations` observations by then (a confirmed track)."""
         out = []
         for tid in sorted(objects.tracks):
             tr = objects.tracks[tid]
             obs = tr.at_frame(frame_index)
-            if obs is None:
+            if (obs is None or len(tr.observations) < min_observations
+                    or tr.observations[min_observations - 1].frame_index > frame_index):
                 continue
             v_w, w_w = velocity_to_world(obs.T_w_o, obs.v_o, obs.w_o)
             out.append(ObjectEstimate(track_id=tid, cls=tr.cls, T_w_o=obs.T_w_o.copy(), v_w=v_w, w_w=w_w,
