@@ -189,15 +189,16 @@ def test_id_switch_reid_after_occlusion_missing_track_and_range():
 
 def test_short_gaps_count_occlusions_of_at_most_one_second_tracked_at_both_ends():
     """Issue 4: "an object that is occluded for <= 1 s keeps its track id". A gap is a run of frames where the
-    GT is not eligible (hidden; with UNOCCLUDED_PROTOCOL also listed but occluded) between two eligible ones."""
+    GT is not eligible (hidden; with UNOCCLUDED_PROTOCOL also listed but occluded) between two eligible ones;
+    its ends are the last estimate before it and the first one after it (a track reported a frame late)."""
     n = 40
     hidden = {1: [*range(10, 15), *range(30, 34)], 2: range(10, 15), 3: range(5, 20)}
     scene = Scene(n, three_cars(n), hidden)
     for i in range(25, 30):  # car 2 listed but partly occluded (KITTI level 1)
         scene.gt[i] = [dataclasses.replace(g, occlusion=1) if g.track_id == 2 else g for g in scene.gt[i]]
     assignment = {
-        1: {i: 10 for i in range(n) if i not in hidden[1] and i != 34},  # 0.6 s gap kept; 0.5 s gap untracked at f34
-        2: {i: 20 if i < 10 else 21 for i in range(n) if i not in hidden[2]},  # 0.6 s gap, new id after it
+        1: {i: 10 for i in range(n) if i not in hidden[1] and i < 34},  # 0.6 s gap kept; 0.5 s gap untracked after
+        2: {i: 20 if i < 10 else 21 for i in range(n) if i not in hidden[2] and i != 15},  # 0.6 s gap, new id from f16
         3: {i: 30 if i < 5 else 31 for i in range(n) if i not in hidden[3]},  # 1.6 s gap: not a short one
     }
     est, T_w_c_est = scene.estimate(assignment)

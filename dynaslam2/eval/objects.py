@@ -34,8 +34,9 @@ Definitions (parameters in ObjectEvalConfig):
   out of view or beyond range). max_gap_s: the longest time between two consecutive visible frames of
   the track that are not adjacent (0 when it is visible in one run).
 - short_gaps: the gaps of at most `short_gap_s` between two consecutive visible frames that are not
-  adjacent and where some estimate overlaps the GT at both ends; short_gaps_kept: those where the best
-  overlapping estimate is the same at both ends (issue 4: "an object that is occluded for <= 1 s keeps its
+  adjacent, where some estimate overlaps the GT in the run of adjacent visible frames before the gap and in
+  the run after it; short_gaps_kept: those where the best overlapping estimate of the last such frame before
+  the gap and of the first one after it are the same (issue 4: "an object that is occluded for <= 1 s keeps its
   track id"; with `UNOCCLUDED_PROTOCOL` a gap is a run of frames where the object is occluded, hidden
   or beyond range).
 - per_track.<gt_id>: ate_m, ate_cam_m, rpe_t, rpe_r, tp_ratio, matched_est_id, visible_frames,
@@ -275,8 +276,12 @@ def _switches(frames: np.ndarray, assigned: list[int | None], timestamps: np.nda
                 id_switches += 1
             else:
                 reid_switches += 1
-    ends = zip(frames[:-1], frames[1:], assigned[:-1], assigned[1:])
-    gaps = [(timestamps[f2] - timestamps[f1], a1, a2) for f1, f2, a1, a2 in ends if f2 > f1 + 1]
+    # Runs of adjacent eligible frames; a gap lies between two runs, its ends are the last estimate reported in
+    # the run before it and the first one in the run after it (a track reported a frame late still counts).
+    starts = np.r_[0, np.flatnonzero(np.diff(frames) > 1) + 1, len(frames)]
+    runs = [[a for a in assigned[i:j] if a is not None] for i, j in zip(starts[:-1], starts[1:])]
+    gaps = [(timestamps[frames[j]] - timestamps[frames[j - 1]], r1[-1] if r1 else None, r2[0] if r2 else None)
+            for j, r1, r2 in zip(starts[1:-1], runs[:-1], runs[1:])]
     short = [(a1, a2) for dt, a1, a2 in gaps if dt <= short_gap_s + 1e-9 and a1 is not None and a2 is not None]
     return {"id_switches": id_switches, "reid_switches": reid_switches,
             "max_gap_s": float(max((dt for dt, _, _ in gaps), default=0.0)),
