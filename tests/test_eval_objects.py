@@ -187,7 +187,7 @@ def test_id_switch_reid_after_occlusion_missing_track_and_range():
     assert wide["per_track"]["4"]["tp_ratio"] == 1.0 and wide["per_track"]["5"]["matched_est_id"] == 50
 
 
-def test_short_gaps_count_occlusions_of_at_most_one_second_tracked_at_both_ends():
+def test_short_gaps_count_occlusions_of_at_most_one_second_tracked_on_both_sides():
     """Issue 4: "an object that is occluded for <= 1 s keeps its track id". A gap is a run of frames where the
     GT is not eligible (hidden; with UNOCCLUDED_PROTOCOL also listed but occluded) between two eligible ones;
     its ends are the last estimate before it and the first one after it (a track reported a frame late)."""
