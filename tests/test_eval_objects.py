@@ -12,8 +12,8 @@ from dynaslam2.classes import CLASS_IDS
 from dynaslam2.cli import main
 from dynaslam2.errors import InputError
 from dynaslam2.eval.objects import (
-    PAPER_PROTOCOL, UNOCCLUDED_PROTOCOL, ObjectEvalConfig, box_iou, evaluate_object_tracks, evaluate_objects,
-    track_errors,
+    PAPER_PROTOCOL, UNOCCLUDED_PROTOCOL, ObjectEvalConfig, box_covered, box_iou, evaluate_object_tracks,
+    evaluate_objects, track_errors,
 )
 from dynaslam2.eval.report import evaluate, format_table
 from dynaslam2.geometry.camera import StereoCamera
@@ -258,6 +258,8 @@ def test_box_iou_values():
     a = np.array([[0.0, 0.0, 10.0, 10.0]])
     b = np.array([[5.0, 0.0, 15.0, 10.0], [20.0, 20.0, 30.0, 30.0], [np.nan] * 4, [0.0, 0.0, 10.0, 10.0]])
     assert np.allclose(box_iou(a, b), [[50.0 / 150.0, 0.0, 0.0, 1.0]])
+    inner = np.array([[2.0, 2.0, 4.0, 4.0], [8.0, 0.0, 12.0, 10.0], [3.0, 3.0, 3.0, 3.0]])
+    assert np.allclose(box_covered(a, np.r_[b, inner]), [[0.5, 0.0, 0.0, 1.0, 1.0, 0.5, 0.0]])
 
 
 def test_velocity_to_world_matches_the_constant_velocity_model():

@@ -13,7 +13,7 @@ from dynaslam2.features.orb import Keypoints
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp, so3_log
 from dynaslam2.map.frame import Frame
-from dynaslam2.map.objects import ObjectMap
+from dynaslam2.map.objects import ObjectMap, ObjectObservation
 from dynaslam2.optim.object_pose import motion_increment
 from dynaslam2.tracking.objects import ObjectTracker, rigid_fit
 
@@ -335,7 +335,8 @@ def test_object_creation_thresholds():
     np.testing.assert_allclose(P.X_o[: P.size] + e.T_w_o[:3, 3], X_w, atol=1e-3)
 
 
-@pytest.mark.parametrize("key,value", [("min_inliers", 2), ("join_ratio", 1.5), ("max_lost_s", 0)])
+@pytest.mark.parametrize("key,value", [("min_inliers", 2), ("join_ratio", 1.5), ("max_lost_s", 0),
+                                       ("box_velocity_window_s", -0.1), ("join_contain", 1.5)])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 
@@ -480,6 +481,61 @@ def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong
     car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
     (e4,) = trk.track(make_frame(4, [(car, T_car[4])]), None, objects).estimates
     assert e4.track_id == e.track_id and not tr.last.measured
+
+
+@pytest.mark.parametrize("window_s", [0.5, 0.0])
+def test_box_association_moves_the_last_box_of_a_track_without_velocity_at_its_image_velocity(window_s):
+    """A pedestrian measured once and then carried by box joins (its velocity unknown, its prediction standing
+    still) is hidden for 0.3 s and re-appears 32 px on, beyond its 24 px wide last box, with a new appearance:
+    its last box moved on at the image velocity of its boxes (objects.box_velocity_window_s) keeps its id;
+    the box as it was (window 0) does not."""
+    rng = np.random.default_rng(21)
+    ped = Body(rng, 2001, 40, (0.6, 1.7, 0.6))
+    T_ped = [make_pose(np.eye(3), np.array([-1.0 + 0.2 * i, 0.5, 10.0])) for i in range(7)]
+    objects, trk = ObjectMap(), tracker(f"objects.box_velocity_window_s={window_s}")
+    ids = []
+    for i in [0, 1, 2, 6]:
+        ped.desc = rng.integers(0, 256, ped.desc.shape).astype(np.uint8)  # no descriptor match: box joins only
+        (e,) = trk.track(make_frame(i, [(ped, T_ped[i])]), None, objects).estimates
+        ids.append(e.track_id)
+        tr = objects.tracks[e.track_id]
+        assert not tr.velocity_known and tr.last.measured == (tr.last.frame_index == 0 or e.track_id != ids[0])
+    assert ids[:3] == [ids[0]] * 3
+    assert (ids[3] == ids[0]) == (window_s > 0)
+
+
+def test_image_extrapolated_box_moves_with_the_unclipped_edges():
+    """The edge that moved least per axis gives the image velocity: an occluder that clips the bottom of the box
+    does not move it up."""
+    trk, track = tracker(), ObjectMap().new_track("pedestrian")
+    for k, box in enumerate([(100.0, 50.0, 120.0, 110.0), (104.0, 50.0, 124.0, 110.0), (108.0, 50.0, 128.0, 80.0)]):
+        track.observations.append(ObjectObservation(k, k * DT, np.eye(4), np.zeros(3), np.zeros(3), 2001,
+                                                    np.zeros(0, np.int64), np.zeros(0, np.int64), box))
+    np.testing.assert_allclose(trk.image_extrapolated_box(track, 5 * DT), [120.0, 50.0, 140.0, 80.0])
+    track.observations[:2] = []
+    assert trk.image_extrapolated_box(track, 5 * DT) is None
+
+
+@pytest.mark.parametrize("contain", [0.8, 0.0])
+def test_box_association_joins_an_object_emerging_around_its_last_box(contain):
+    """A parked car seen only by its right quarter (the rest behind an occluder) re-appears whole with a new
+    appearance: its last box lies inside the instance's box with an IoU of ~0.25 (< join_iou), and it keeps its
+    id only by the containment test (objects.join_contain)."""
+    rng = np.random.default_rng(22)
+    car = Body(rng, 1001, 160, (4.0, 1.5, 1.5))
+    part = Body(rng, 1001, 0, (1.0, 1.0, 1.0))
+    visible = car.X_b[:, 0] > 1.0
+    part.X_b, part.desc = car.X_b[visible], car.desc[visible]
+    T_car = make_pose(np.eye(3), np.array([0.0, 0.8, 15.0]))
+    objects, trk = ObjectMap(), tracker(f"objects.join_contain={contain}")
+    e = track_alone(trk, objects, part, [T_car] * 3)
+    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    frame = make_frame(3, [(car, T_car)])
+    iou = box_iou(np.array([objects.tracks[e.track_id].last.box2d]), trk._keypoint_boxes(
+        frame, np.ones(len(frame.keypoints), bool), np.array([1001])))[0, 0]
+    assert 0.5 * trk.cfg.join_iou <= iou < trk.cfg.join_iou
+    (e3,) = trk.track(frame, None, objects).estimates
+    assert (e3.track_id == e.track_id) == (contain > 0)
 
 
 def camera_at(z: float) -> np.ndarray:

@@ -85,17 +85,29 @@ PAPER_PROTOCOL = ObjectEvalConfig(min_box_height_px=40.0, max_occlusion=0, max_t
 UNOCCLUDED_PROTOCOL = ObjectEvalConfig(max_occlusion=0)
 
 
-def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
-    """(N, 4) x (M, 4) boxes (left, top, right, bottom) -> (N, M) IoU; NaN boxes give 0."""
+def _box_areas(boxes_a: np.ndarray, boxes_b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, M) intersection areas, (N, 1) areas of `boxes_a`, (1, M) areas of `boxes_b` (left, top, right, bottom)."""
     a = np.asarray(boxes_a, dtype=float).reshape(-1, 1, 4)
     b = np.asarray(boxes_b, dtype=float).reshape(1, -1, 4)
     w = np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0])
     h = np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1])
     inter = np.clip(np.nan_to_num(w), 0.0, None) * np.clip(np.nan_to_num(h), 0.0, None)
-    area_a = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1])
-    area_b = (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+    return inter, (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1]), (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+
+
+def box_iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
+    """(N, 4) x (M, 4) boxes (left, top, right, bottom) -> (N, M) IoU; NaN boxes give 0."""
+    inter, area_a, area_b = _box_areas(boxes_a, boxes_b)
     union = np.nan_to_num(area_a + area_b - inter)
     return np.where(union > 0.0, inter / np.where(union > 0.0, union, 1.0), 0.0)
+
+
+def box_covered(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
+    """(N, 4) x (M, 4) boxes -> (N, M) fraction of each box of `boxes_b` that lies inside each box of `boxes_a`;
+    NaN or empty boxes give 0."""
+    inter, _, area_b = _box_areas(boxes_a, boxes_b)
+    area_b = np.nan_to_num(np.broadcast_to(area_b, inter.shape))
+    return np.where(area_b > 0.0, inter / np.where(area_b > 0.0, area_b, 1.0), 0.0)
 
 
 def frame_offset(T_est: np.ndarray, T_gt: np.ndarray) -> np.ndarray:

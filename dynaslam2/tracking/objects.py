@@ -25,7 +25,7 @@ import numpy as np
 
 from dynaslam2.classes import CLASS_IDS, CLASS_NAMES, DYNAMIC_CLASSES, INSTANCE_CLASS_FACTOR
 from dynaslam2.config import SlamConfig
-from dynaslam2.eval.objects import box_iou
+from dynaslam2.eval.objects import box_covered, box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_exp, so3_log, so3_right_jacobian, transform
@@ -171,6 +171,23 @@ class ObjectTracker:
             uv_last, uv_pred, scale = motion
             box = np.r_[uv_pred, uv_pred] + scale * (box - np.r_[uv_last, uv_last])
         return np.clip(box, 0.0, [self.camera.width - 1, self.camera.height - 1] * 2)
+
+    def image_extrapolated_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray | None:
+        """The last 2D box moved on to `timestamp` at the image velocity of the track's boxes since its observation
+        box_velocity_window_s before the last one (SORT's constant-velocity box). Per image axis the box edge that
+        moved least gives the motion: an occluder or the image border clips the other edge, which then moves with
+        it. None without such an earlier box."""
+        last = track.last
+        if last.box2d is None:
+            return None
+        earlier = next((o for o in track.observations[:-1] if o.box2d is not None
+                        and last.timestamp - o.timestamp <= self.cfg.box_velocity_window_s), None)
+        if earlier is None:
+            return None
+        box = np.asarray(last.box2d, dtype=float)
+        moved = (box - np.asarray(earlier.box2d, dtype=float)).reshape(2, 2)  # rows: min, max corner; columns: u, v
+        per_s = moved[np.argmin(np.abs(moved), axis=0), [0, 1]] / (last.timestamp - earlier.timestamp)
+        return box + np.tile(per_s * (timestamp - last.timestamp), 2)
 
     def _image_motion(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray,
                       min_points: int) -> tuple[np.ndarray, np.ndarray, float] | None:
@@ -683,10 +700,10 @@ class ObjectTracker:
     def _join_by_box(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                      box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
         """The unseen track measured within `max_gap_s` and with a predicted box (`predicted_box`: not
-        passed behind the camera) whose last box, as it was or moved by its predicted image motion (wrong
-        when the velocity is, or for a near object whose origin projects off its visible part), overlaps
-        `box` most, if that IoU is >= join_iou and no box of the frame's instances that can still join a
-        track (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
+        passed behind the camera) whose last box, as it was (`_last_box`) or moved by its predicted image motion
+        (wrong when the velocity is, or for a near object whose origin projects off its visible part), overlaps
+        `box` most (`_join_overlap`), if that is >= join_iou and no box of the frame's instances that can still
+        join a track (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
         cfg = self.cfg
         if not np.all(np.isfinite(box)):
             return None
@@ -696,14 +713,31 @@ class ObjectTracker:
         if not recent:
             return None
         moved = np.array(moved)
-        last = np.array([tr.last.box2d for tr in recent], dtype=float)
-        iou = np.maximum(box_iou(np.array([box]), moved)[0], box_iou(np.array([box]), last)[0])
+        last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
+        iou = np.maximum(self._join_overlap(box, moved), self._join_overlap(box, last))
         b = int(np.argmax(iou))
         if iou[b] < cfg.join_iou:
             return None
         # Mutual best: adjacent instances swapped tracks otherwise, the instances being taken in id order.
         others = np.maximum(box_iou(moved[b:b + 1], boxes)[0], box_iou(last[b:b + 1], boxes)[0])
         return recent[b] if iou[b] >= others.max() else None
+
+    def _last_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray:
+        """The track's last box as it was; without a known velocity (its 3D prediction stands still), moved on at
+        its image velocity (`image_extrapolated_box`) when it has one."""
+        moving = None if track.velocity_known else self.image_extrapolated_box(track, timestamp)
+        return np.asarray(track.last.box2d if moving is None else moving, dtype=float)
+
+    def _join_overlap(self, box: np.ndarray, track_boxes: np.ndarray) -> np.ndarray:
+        """IoU of the instance's `box` with each of `track_boxes`, raised to join_iou for a track box that lies >=
+        join_contain inside `box` with an IoU of >= join_iou / 2 (an object emerging from behind an occluder: its
+        box grows around the partly visible last one)."""
+        cfg = self.cfg
+        iou = box_iou(box[None], track_boxes)[0]
+        if not cfg.join_contain:
+            return iou
+        inside = box_covered(box[None], track_boxes)[0] >= cfg.join_contain
+        return np.where(inside & (iou >= 0.5 * cfg.join_iou), np.maximum(iou, cfg.join_iou), iou)
 
     def _cull(self, objects: ObjectMap, track_ids: list[int]) -> None:
         """Drop object points of the tracked objects that are rarely found where they project."""
