@@ -602,8 +602,8 @@ class ObjectsConfig:
                      "rotation_floor_rad", "initial_angular_speed_sigma"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
-        for name in ("coast_max_s", "box_velocity_window_s", "pose_disparity_weight", "n_features", "features_max_level",
-                     "densify_features", "densify_max_level"):
+        for name in ("coast_max_s", "box_velocity_window_s", "pose_disparity_weight", "n_features",
+                     "features_max_level", "densify_features", "densify_max_level"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"objects.{name}: expected >= 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",

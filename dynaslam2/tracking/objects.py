@@ -180,8 +180,12 @@ class ObjectTracker:
         last = track.last
         if last.box2d is None:
             return None
-        earlier = next((o for o in track.observations[:-1] if o.box2d is not None
-                        and last.timestamp - o.timestamp <= self.cfg.box_velocity_window_s), None)
+        earlier = None  # the oldest boxed observation within the window, searched back from the newest
+        for o in reversed(track.observations):
+            if last.timestamp - o.timestamp > self.cfg.box_velocity_window_s:
+                break
+            if o is not last and o.box2d is not None:
+                earlier = o
         if earlier is None:
             return None
         box = np.asarray(last.box2d, dtype=float)
