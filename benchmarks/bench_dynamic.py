@@ -35,14 +35,16 @@ from dynaslam2.eval.trajectory import ate
 from dynaslam2.io.sequence import open_sequence
 from dynaslam2.system import System
 from sim.scenarios import load_scenario
+from sim.world import WORLD_VERSION
 
 
 def ensure_sequence(work: Path, scenario: str, seed: int, frames: int, size: str,
                     sim_overrides: tuple[str, ...] = ()) -> Path:
-    """The sequence's folder under `work`, generated on first use; scenario overrides (`sim_overrides`,
-    e.g. "fx=721.5") are part of its name, so each camera or world variant is cached apart."""
+    """The sequence's folder under `work`, generated on first use; the sim's world version and scenario
+    overrides (`sim_overrides`, e.g. "fx=721.5") are part of its name, so each world or camera variant is
+    cached apart and a changed world is regenerated."""
     suffix = "".join("_" + "".join(c if c.isalnum() or c in ".-" else "-" for c in o) for o in sim_overrides)
-    out = work / f"{scenario}_s{seed}_{frames}_{size}{suffix}"
+    out = work / f"{scenario}_s{seed}_{frames}_{size}_w{WORLD_VERSION}{suffix}"
     if not (out / "meta.json").exists():
         os.environ.setdefault("MUJOCO_GL", "egl")
         from sim.generate import generate_sequence

@@ -1,7 +1,7 @@
 """Benchmark of the bundle adjustment with objects (dynaslam2.optim.object_ba), median ms.
 
     python benchmarks/bench_object_ba.py [--repeats 5] [--set optim.objects.motion_points_variable=true ...]
-    python benchmarks/bench_object_ba.py --capture /tmp/bench_dynamic/traffic_s0_150_640x480 --windows W.pkl
+    python benchmarks/bench_object_ba.py --capture /tmp/bench_dynamic/traffic_s0_150_640x480_w2 --windows W.pkl
     python benchmarks/bench_object_ba.py --windows W.pkl --compare optim.objects.motion_form=stacked ""
 
 --capture runs the `dynamic` mode on a sequence and saves every BA-with-objects window it solves

@@ -41,14 +41,15 @@ class GenerationStats:
 
 
 def package_versions() -> dict[str, str]:
-    """Versions of the packages that determine the output bytes."""
+    """Versions of the packages (and of the sim world) that determine the output bytes."""
     import cv2
     import mujoco
 
     import dynaslam2
+    from sim.world import WORLD_VERSION
 
     return {"dynaslam2": dynaslam2.__version__, "mujoco": mujoco.__version__, "numpy": np.__version__,
-            "opencv": cv2.__version__}
+            "opencv": cv2.__version__, "sim_world": str(WORLD_VERSION)}
 
 
 def sequence_meta(cfg: ScenarioConfig, render_cfg: RenderConfig, gt_cfg: GroundTruthConfig) -> dict:

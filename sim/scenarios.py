@@ -68,7 +68,7 @@ class ScenarioConfig:
     curve_deg: float = 15.0  # the street bends by this angle (+ = left, 0 = straight) ...
     curve_start: float = 45.0  # ... starting this far (m) ahead of the ego's start (after the intersection)
     curve_length: float = 120.0  # ... over this length (m), curvature rising and falling smoothly
-    texture_px: int = 256  # side of vehicle/facade textures in pixels
+    texture_px: int = 256  # vehicle textures: pixels per 4 m of the vehicle's length; facades up to twice that
 
     def validate(self) -> None:
         """Raise ConfigError naming the first field that is out of range."""

@@ -61,18 +61,22 @@ def _rects(img: np.ndarray, rng: np.random.Generator, n: int, size: tuple[float,
         img[y0:y0 + rh, x0:x0 + rw] = (1 - alpha) * img[y0:y0 + rh, x0:x0 + rw] + alpha * c
 
 
-def vehicle_paint(rng: np.random.Generator, size: int, rich: bool = True) -> np.ndarray:
-    """Car paint: a base colour with noise, random stripes, decals and dirt."""
+def vehicle_paint(rng: np.random.Generator, size: int, rich: bool = True, side_m: float = 2.0) -> np.ndarray:
+    """Car paint: a base colour with noise, random stripes, decals and dirt, for a texture that spans
+    side_m x side_m metres: decals (0.08-0.44 m), badges and stripes keep their size in metres and their
+    number per square metre whatever side_m is (the default 2 m draws what a 2 m sign board shows)."""
+    scale = 2.0 / side_m  # fraction of the image per fraction of a 2 m texture
+    area = (side_m / 2.0) ** 2
     base = _rgb(rng, sat=(0.2, 0.9), val=(0.35, 0.95))
     img = _shade(base, value_noise(rng, size, size, octaves=6, base=3), 0.5)
     if rng.random() < 0.7:  # stripes along the body
-        for _ in range(int(rng.integers(1, 4))):
+        for _ in range(int(rng.integers(1, 4) * side_m / 2.0)):
             y0 = int(rng.integers(0, size - 4))
-            img[y0:y0 + int(rng.integers(2, max(3, size // 12)))] = _rgb(rng)
-    _rects(img, rng, int(rng.integers(6, 14)), (0.04, 0.22))  # decals / logos / number plates
-    for _ in range(int(rng.integers(3, 8))):  # round badges
+            img[y0:y0 + max(2, int(rng.integers(2, max(3, size // 12)) * scale))] = _rgb(rng)
+    _rects(img, rng, int(rng.integers(6, 14) * area), (0.04 * scale, 0.22 * scale))  # decals, number plates
+    for _ in range(int(rng.integers(3, 8) * area)):  # round badges
         c = (int(rng.integers(0, size)), int(rng.integers(0, size)))
-        cv2.circle(img, c, int(rng.integers(3, max(4, size // 10))), _rgb(rng).tolist(), -1)
+        cv2.circle(img, c, max(2, int(rng.integers(3, max(4, size // 10)) * scale)), _rgb(rng).tolist(), -1)
     dirt = value_noise(rng, size, size, octaves=4, base=8)
     img *= (0.75 + 0.25 * dirt)[..., None]
     return _finish(img, rich)

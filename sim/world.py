@@ -20,6 +20,10 @@ from sim import textures as tex
 from sim.motion import CAMERA_FORWARD, MotionPlan, PlannedActor, StreetLayout, Trajectory, plan_scenario
 from sim.scenarios import ScenarioConfig
 
+# Bumped whenever the rendered world changes for the same scenario config and seed, so that cached sequences
+# (benchmarks) are not silently stale. 2: vehicle paint and glass undistorted (were stretched per box face).
+WORLD_VERSION = 2
+
 # OpenCV camera axes (x right, y down, z forward) expressed in the ego body frame (x fwd, y left, z up)
 R_BODY_CV = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 _VISUAL = dict(contype=0, conaffinity=0)
@@ -135,14 +139,21 @@ class _Builder:
         self.spec = spec
         self.layout = layout
         self.rich = rich
-        self.px = px  # side of vehicle textures; facades up to twice that
+        self.px = px  # vehicle texture pixels per 4 m; facades up to twice that
         self.n = 0
+        self.tile_m: dict[str, float] = {}  # materials mapped in metres (see `material`)
 
     def material(self, img: np.ndarray | None, rgba=(1, 1, 1, 1), specular: float = 0.1,
-                 shininess: float = 0.2) -> str:
+                 shininess: float = 0.2, tile_m: float | None = None) -> str:
+        """A material, textured with img if given. MuJoCo stretches a 2D texture over each face of a box
+        primitive (a car's 4 x 0.6 m side shows it squeezed 7:1, and `texuniform` does not undo that for
+        boxes); with tile_m, `box` builds its boxes as meshes that show one undistorted copy of img per
+        tile_m x tile_m metres of the body, continuous across the body's boxes."""
         self.n += 1
         name = f"mat{self.n}"
         mat = self.spec.add_material(name=name, rgba=list(rgba), specular=specular, shininess=shininess)
+        if tile_m is not None:
+            self.tile_m[name] = tile_m
         if img is not None:
             tname = f"tex{self.n}"
             t = self.spec.add_texture(name=tname, type=mujoco.mjtTexture.mjTEXTURE_2D, width=img.shape[1],
@@ -198,15 +209,52 @@ class _Builder:
         return self.spec.worldbody.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{name}_mesh",
                                             material=material, **_VISUAL)
 
-    @staticmethod
-    def box(body, center, half, material: str, quat=None, group: int = 0, name: str | None = None):
-        kw = dict(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half), pos=list(center), material=material,
-                  group=group, **_VISUAL)
+    def box(self, body, center, half, material: str, quat=None, group: int = 0, name: str | None = None):
+        """A box geom on body (centre and half sizes in the body frame); a mesh with metric texture
+        coordinates if the material has a tile (see `material`)."""
+        kw = dict(pos=list(center), material=material, group=group, **_VISUAL)
         if quat is not None:
             kw["quat"] = list(quat)
         if name is not None:
             kw["name"] = name
-        return body.add_geom(**kw)
+        if material not in self.tile_m:
+            return body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half), **kw)
+        self.n += 1
+        mesh = f"uvbox{self.n}"
+        vert, uv, face = _uv_box(np.asarray(center, float), np.asarray(half, float), self.tile_m[material])
+        self.spec.add_mesh(name=mesh, uservert=vert.ravel().tolist(), userface=face.ravel().tolist(),
+                           usertexcoord=uv.ravel().tolist())
+        return body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh, **kw)
+
+
+# Per box face: outward normal axis and sign, the face's (u, v) axes as (body axis, sign), and a (u, v)
+# offset in tiles, so that opposite faces do not show the same patch.
+_UV_FACES = (
+    (1, 1.0, (0, 1.0), (2, -1.0), (0.0, 0.0)),  # left side (+y): u along x, v down
+    (1, -1.0, (0, -1.0), (2, -1.0), (0.0, 0.5)),  # right side
+    (0, 1.0, (1, -1.0), (2, -1.0), (0.25, 0.0)),  # front (+x)
+    (0, -1.0, (1, 1.0), (2, -1.0), (0.75, 0.5)),  # rear
+    (2, 1.0, (0, 1.0), (1, -1.0), (0.5, 0.25)),  # top
+    (2, -1.0, (0, 1.0), (1, 1.0), (0.5, 0.75)),  # bottom
+)
+
+
+def _uv_box(center: np.ndarray, half: np.ndarray, tile_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(24x3 vertices relative to center, 24x2 texture coordinates, 12x3 triangles) of a box mesh whose faces
+    take their texture coordinates from the body coordinates in tiles of tile_m metres (no stretch)."""
+    verts, uvs, faces = [], [], []
+    for k, (axis, sign, (ua, us), (va, vs), (u0, v0)) in enumerate(_UV_FACES):
+        quad = np.empty((4, 3))
+        quad[:, axis] = center[axis] + sign * half[axis]
+        for i, (a, b) in enumerate(((-1, -1), (1, -1), (1, 1), (-1, 1))):
+            quad[i, ua] = center[ua] + us * a * half[ua]
+            quad[i, va] = center[va] + vs * b * half[va]
+        verts.append(quad - center)
+        uvs.append(np.column_stack([us * quad[:, ua] / tile_m + u0, vs * quad[:, va] / tile_m + v0]))
+        tri = 4 * k + np.array([[0, 1, 2], [0, 2, 3]])
+        normal = np.cross(quad[1] - quad[0], quad[2] - quad[0])
+        faces.append(tri if normal[axis] * sign > 0 else tri[:, ::-1])  # counter-clockwise seen from outside
+    return np.concatenate(verts), np.concatenate(uvs), np.concatenate(faces)
 
 
 def build_world(cfg: ScenarioConfig) -> World:
@@ -398,9 +446,9 @@ def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) 
     so that the 3D box is tight in the image, not only in 3D.
     """
     L, W, H = pa.dims
-    size = b.px
-    paint = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.4, shininess=0.6)
-    glass = b.material(tex.glass(rng, 128, rich=b.rich), specular=0.6, shininess=0.8)
+    size = int(np.clip(b.px * L / 4.0, 64, 1024))  # texture_px per 4 m
+    paint = b.material(tex.vehicle_paint(rng, size, rich=b.rich, side_m=L), specular=0.4, shininess=0.6, tile_m=L)
+    glass = b.material(tex.glass(rng, 128, rich=b.rich), specular=0.6, shininess=0.8, tile_m=W)
     tyre = b.material(None, rgba=(0.08, 0.08, 0.08, 1), specular=0.05)
     z0 = -H / 2  # ground in body coordinates
     r = {"car": 0.32, "van": 0.36, "truck": 0.5}[pa.cls]
@@ -425,7 +473,7 @@ def _add_vehicle(b: _Builder, body, pa: PlannedActor, rng: np.random.Generator) 
               paint)
         b.box(body, (L / 2 - cab_l / 2 - 0.05, 0, z0 + 0.9 * H), (cab_l / 2 - 0.05, 0.47 * W, 0.1 * H), paint)  # fairing
         b.box(body, (L / 2 - 0.02, 0, z0 + 0.65 * H), (0.02, 0.4 * W, 0.1 * H), glass)
-        cargo = b.material(tex.vehicle_paint(rng, size, rich=b.rich), specular=0.2)
+        cargo = b.material(tex.vehicle_paint(rng, size, rich=b.rich, side_m=L), specular=0.2, tile_m=L)
         b.box(body, (-(cab_l + 0.1) / 2, 0, z0 + (1.0 + H) / 2), ((L - cab_l - 0.1) / 2, W / 2, (H - 1.0) / 2), cargo)
         front_top, rear_top = 0.6, 1.0
     za, la = _APRON_Z[pa.cls], _APRON_LEN[pa.cls]

@@ -83,6 +83,43 @@ def test_every_builtin_builds_with_tight_boxes(name):
         assert not all(a.parked for a in world.actors)
 
 
+def test_vehicle_paint_is_not_stretched(monkeypatch):
+    """A checkerboard as the paint shows square cells on a car's side: MuJoCo stretches a texture over each
+    face of a box primitive (7:1 on a 4.2 x 0.6 m side), so painted boxes are meshes with metric texture
+    coordinates. Measured as the balance of horizontal and vertical gradient energy inside the body box."""
+    import cv2
+
+    def checker(rng, size, rich=True, side_m=2.0):
+        cell = (np.arange(size) // 8) % 2
+        return np.repeat(((cell[:, None] ^ cell[None, :]) * 200 + 30).astype(np.uint8)[..., None], 3, axis=2)
+
+    monkeypatch.setattr("sim.textures.vehicle_paint", checker)
+    world = build_world(load_scenario("traffic", ["frames=2", "image_size=320x240", "view_ahead=60"]))
+    world.set_time(0.0)
+    renderer = mujoco.Renderer(world.model, 240, 320)
+    cam = mujoco.MjvCamera()
+    cam.type, cam.distance, cam.elevation = mujoco.mjtCamera.mjCAMERA_FREE, 5.0, 0.0
+    cars = [a for a in world.actors if a.cls == "car"][:3]
+    assert len(cars) == 3
+    for car in cars:
+        R = world.data.xmat[car.body_id].reshape(3, 3)
+        cam.lookat[:] = world.data.xpos[car.body_id]
+        cam.azimuth = np.degrees(np.arctan2(R[1, 0], R[0, 0])) + 90.0  # looking at the car's right side
+        renderer.disable_segmentation_rendering()
+        renderer.update_scene(world.data, cam)
+        gray = cv2.cvtColor(renderer.render(), cv2.COLOR_RGB2GRAY).astype(np.float32)
+        renderer.enable_segmentation_rendering()
+        renderer.update_scene(world.data, cam)
+        seg = renderer.render()
+        body_box = np.flatnonzero(world.model.geom_bodyid == car.body_id)[0]  # sill to belt line, painted
+        inside = cv2.erode(((seg[..., 0] == body_box) & (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM)).astype(np.uint8),
+                           np.ones((9, 9), np.uint8)).astype(bool)
+        assert inside.sum() > 2000
+        gx, gy = cv2.Sobel(gray, cv2.CV_32F, 1, 0)[inside], cv2.Sobel(gray, cv2.CV_32F, 0, 1)[inside]
+        assert 0.7 < np.sum(gx ** 2) / np.sum(gy ** 2) < 1.4, car.track_id
+    renderer.close()
+
+
 def test_set_time_moves_actors_and_matches_states(traffic):
     w = traffic
     states0 = w.actor_states(0.0)
