@@ -115,18 +115,19 @@ def test_static_scene_accuracy(tmp_path):
 
 @pytest.mark.slow
 def test_masked_beats_static_on_a_dynamic_scene(tmp_path):
-    """Simulated 'following' scene (a vehicle ahead moving with the ego): masked < static ATE."""
+    """Simulated 'following' scene (a vehicle ahead moving with the ego), 150 frames as the issue's claims:
+    masked < static ATE. (On 50 frames the two tie within 2 % on world 2: the lead car's pull builds up.)"""
     pytest.importorskip("mujoco")
     from sim.generate import generate_sequence
     from sim.scenarios import load_scenario
 
-    cfg = load_scenario("following", ["frames=50", "seed=0"])
+    cfg = load_scenario("following", ["frames=150", "seed=0"])
     seq = generate_sequence(cfg, tmp_path / "seq", progress=False)
     ate = {}
     for mode in ("static", "masked"):
         res = run_sequence(seq, mode, tmp_path / mode, progress=False)
         ate[mode] = evaluate(seq, res)["ego"]["ate_rmse_m"]
-    print(f"following, 50 frames 640x480: ATE static {ate['static']:.4f} m, masked {ate['masked']:.4f} m")
+    print(f"following, 150 frames 640x480: ATE static {ate['static']:.4f} m, masked {ate['masked']:.4f} m")
     assert ate["masked"] < ate["static"]
 
 
