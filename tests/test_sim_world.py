@@ -2,6 +2,7 @@
 
 import os
 
+import cv2
 import numpy as np
 import pytest
 
@@ -87,8 +88,6 @@ def test_vehicle_paint_is_not_stretched(monkeypatch):
     """A checkerboard as the paint shows square cells on a car's side: MuJoCo stretches a texture over each
     face of a box primitive (7:1 on a 4.2 x 0.6 m side), so painted boxes are meshes with metric texture
     coordinates. Measured as the balance of horizontal and vertical gradient energy inside the body box."""
-    import cv2
-
     def checker(rng, size, rich=True, side_m=2.0):
         cell = (np.arange(size) // 8) % 2
         return np.repeat(((cell[:, None] ^ cell[None, :]) * 200 + 30).astype(np.uint8)[..., None], 3, axis=2)
