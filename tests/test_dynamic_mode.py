@@ -198,3 +198,42 @@ def test_two_dynamic_runs_give_identical_estimates(run):
     assert len(objects_a) == len(objects_b) > 0
     for a, b in zip(objects_a, objects_b):
         assert a[0] == b[0] and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a[1:], b[1:]))
+
+
+def test_dynamic_static_keypoints_are_masked_modes(run):
+    """The `dynamic` mode's static keypoints (the pass that leaves the dynamic instances out) are `masked`
+    mode's: the same positions, descriptors and stereo depths, whatever the instances' own pass matched."""
+    from dynaslam2.config import load_config
+    from dynaslam2.tracking.frontend import FrameBuilder
+
+    seq = open_sequence(run[0])
+    builders = {mode: FrameBuilder(load_config(None, [f"mode={mode}", "orb.threads=1"]), seq.camera)
+                for mode in ("masked", "dynamic")}
+    n_objects = 0
+    for i in range(0, FRAMES, 5):
+        masked, dynamic = (builders[mode].build(seq[i], {}) for mode in ("masked", "dynamic"))
+        n = len(masked.keypoints)
+        assert np.array_equal(dynamic.static, np.arange(len(dynamic.keypoints)) < n)
+        np.testing.assert_array_equal(masked.keypoints.uv, dynamic.keypoints.uv[:n])
+        np.testing.assert_array_equal(masked.keypoints.desc, dynamic.keypoints.desc[:n])
+        np.testing.assert_array_equal(masked.depth, dynamic.depth[:n])
+        np.testing.assert_array_equal(masked.u_right, dynamic.u_right[:n])
+        n_objects += len(dynamic.keypoints) - n
+    assert n_objects > 0
+
+
+def test_dynamic_mode_without_objects_tracks_the_camera_as_masked_mode(run):
+    """With object creation switched off, the `dynamic` mode's camera is `masked` mode's, pose for pose: the
+    instances' keypoints it extracts besides change nothing of the static map, so a difference between the two
+    modes comes from the objects alone (the paper's comparison run inside one system)."""
+    from dynaslam2.config import load_config
+    from dynaslam2.system import System
+
+    seq = open_sequence(run[0])
+    poses = {}
+    for mode, extra in (("masked", []), ("dynamic", ["objects.min_new_points=1000000000"])):
+        system = System(load_config(None, [f"mode={mode}"] + extra), seq.camera)
+        estimates = [system.process(seq[i]) for i in range(FRAMES)]
+        assert all(not e.objects for e in estimates)
+        poses[mode] = np.array([e.T_w_c for e in estimates])
+    np.testing.assert_array_equal(poses["masked"], poses["dynamic"])

@@ -608,6 +608,25 @@ def test_search_by_projection_recovers_shift(kitti_left, extractor):
     assert np.all(idx_bad[:5] == -1)
 
 
+def test_search_by_projection_breaks_ties_by_keypoint_index():
+    """Equally distant candidates go to the lower keypoint index, whatever other keypoints (e.g. the `dynamic`
+    mode's object keypoints, unavailable to static points) shape the search grid."""
+    desc = np.random.default_rng(0).integers(0, 256, (1, 32), dtype=np.uint8)
+
+    def keypoints(uv):
+        n = len(uv)
+        return Keypoints(np.asarray(uv, np.float32), np.zeros(n, np.int32), np.zeros(n, np.float32),
+                         np.ones(n, np.float32), np.repeat(desc, n, axis=0))
+
+    twins = [[94.5, 101.0], [107.5, 101.0]]  # one descriptor, both 6.5 px from the projection
+    for others in ([], [[3.0, 3.0], [90.0, 180.0], [300.0, 5.0]]):  # the others move the grid's cell borders
+        for pair in (twins, twins[::-1]):
+            kp = keypoints(pair + others)
+            idx = search_by_projection(kp, np.array([[101.0, 101.0]]), desc, np.array([8.0]), None, None, None,
+                                       50, 1.0, False, available=np.arange(len(kp)) < 2)
+            assert idx[0] == 0, (others, pair)
+
+
 def _narrow_objects_pair(d_bg: float = 6.0, d_obj: float = 15.0, width: int = 7, shape=(240, 320), seed: int = 0):
     """Narrow vertical objects (7 px wide, labels 2001, 2002, ...; a pedestrian at 15 m at 640x480) of one
     texture at disparity `d_obj` before a background of another texture at `d_bg`: (left, right, labels)."""

@@ -163,9 +163,10 @@ def _pairs_in_radius(
     return q[inside], k[inside]
 
 
-def _best_two(q: np.ndarray, dist: np.ndarray, n_q: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per query: position (into q) of the best pair, and of the 2nd best (-1 if none); sort by (q, dist, pos)."""
-    order = np.lexsort((np.arange(len(q)), dist, q))
+def _best_two(q: np.ndarray, k: np.ndarray, dist: np.ndarray, n_q: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per query: position (into q) of the best pair, and of the 2nd best (-1 if none); sort by (q, dist, k).
+    Ties go to the lower keypoint index, whatever other keypoints shape the search grid."""
+    order = np.lexsort((k, dist, q))
     qs = q[order]
     first = np.flatnonzero(np.r_[True, qs[1:] != qs[:-1]])
     best = np.full(n_q, -1, np.int64)
@@ -238,7 +239,7 @@ def search_by_projection(
     if len(q) == 0:
         return result
     dist = hamming_indexed(np.asarray(desc_proj), kp.desc, q, k)
-    best, second, _ = _best_two(q, dist, M)
+    best, second, _ = _best_two(q, k, dist, M)
     has = best >= 0
     best_d = np.where(has, dist[np.maximum(best, 0)], 256)
     ok = has & (best_d <= th_high)

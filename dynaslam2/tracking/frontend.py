@@ -59,11 +59,11 @@ class FrameBuilder:
         if data.right is None and data.depth is None:
             raise InputError(f"frame {data.index}: needs a right image or a depth image")
 
-    def _row_search(self, kp, on_dyn: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray,
+    def _row_search(self, kp, on_objects: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray,
                     instances: np.ndarray | None) -> None:
-        """Depth by row search (stereo.dynamic_row_search) for the keypoints on dynamic instances
-        (`on_dyn`) that `match_stereo` left without; fills `u_right` and `depth` in place."""
-        idx = np.flatnonzero(on_dyn & (depth <= 0))
+        """Depth by row search (stereo.dynamic_row_search) for the object keypoints
+        (`on_objects`) that `match_stereo` left without; fills `u_right` and `depth` in place."""
+        idx = np.flatnonzero(on_objects & (depth <= 0))
         ur, z = search_stereo_rows(kp, idx, pyr_l, pyr_r, self.camera, self.config.stereo,
                                    self.config.stereo.row_search_min_depth_m, self.config.objects.max_point_depth_m,
                                    instances if self.config.stereo.row_search_instance_mask else None)
@@ -129,6 +129,7 @@ class FrameBuilder:
         else:  # left and right concurrently with orb.threads > 1 (ORB-SLAM2 extracts them in two threads)
             pyr_r = self.extractor.build_pyramid(to_gray(data.right))
             kp, kp_r = self.extractor.extract_pair(pyr_l, pyr_r, mask, self.n_features_right)
+        n_static = len(kp)
         if separate and dyn is not None and objects_px.any():
             cfg = self.config.objects
             on_objects = self.extractor.extract(pyr_l, mask=objects_px, n_features=cfg.n_features,
@@ -140,19 +141,25 @@ class FrameBuilder:
         t1 = time.perf_counter()
         n = len(kp)
         col, row = self._pixels(kp)
-        on_dyn = dyn[row, col] if dyn is not None else np.zeros(n, dtype=bool)
+        if mode != "dynamic":
+            static = np.ones(n, dtype=bool)
+        elif separate:  # the first pass's keypoints are `masked` mode's, also those an upper level rounds onto `dyn`
+            static = np.arange(n) < n_static
+        else:
+            static = ~dyn[row, col] if dyn is not None else np.ones(n, dtype=bool)
         if use_depth:
             u_right, depth = depth_from_image(kp, data.depth, self.camera)
         else:
-            # The added keypoints (objects.densify_*) get depth from the row search only: the first pass's
-            # matches (and their SAD statistics) stay as without them.
-            first = kp if n == n_first else kp.subset(slice(0, n_first))
-            u_right, depth = match_stereo(first, kp_r, pyr_l, pyr_r, self.camera, self.extractor.scale_factors,
-                                          self.config.stereo)
-            none = np.full(n - n_first, -1.0)  # float64 arrays: the row search writes its depths in full precision
-            u_right, depth = np.r_[u_right.astype(np.float64), none], np.r_[depth.astype(np.float64), none]
+            # Each extraction pass is matched on its own, so that its SAD outlier test (relative to the pass's
+            # median) is its own: the static keypoints get `masked` mode's depths, whatever the instances' pass
+            # matched. The added keypoints (objects.densify_*) get depth from the row search only.
+            u_right, depth = np.full(n, -1.0), np.full(n, -1.0)  # float64: the row search writes full precision
+            for part in (slice(0, n_static), slice(n_static, n_first)):
+                if part.stop > part.start:
+                    u_right[part], depth[part] = match_stereo(kp.subset(part), kp_r, pyr_l, pyr_r, self.camera,
+                                                              self.extractor.scale_factors, self.config.stereo)
             if mode == "dynamic" and self.config.stereo.dynamic_row_search:
-                self._row_search(kp, on_dyn, pyr_l, pyr_r, u_right, depth, data.instances)
+                self._row_search(kp, ~static, pyr_l, pyr_r, u_right, depth, data.instances)
         t2 = time.perf_counter()
         if data.instances is not None:
             instance_id = data.instances[row, col].astype(np.int64)
@@ -161,8 +168,7 @@ class FrameBuilder:
             instance_id = np.zeros(n, dtype=np.int64)
             class_id = np.zeros(n, dtype=np.int64)
         if mode == "dynamic" and data.instances is not None and self.config.objects.masked_descriptors:
-            self._mask_descriptors(kp, pyr_l, objects_px, objects_px[row, col])
-        static = ~on_dyn if mode == "dynamic" else np.ones(n, dtype=bool)
+            self._mask_descriptors(kp, pyr_l, objects_px, objects_px[row, col] & ~static)
         timing_ms["features"] = (t1 - t0 + time.perf_counter() - t2) * 1e3
         timing_ms["stereo"] = (t2 - t1) * 1e3
         return Frame(
