@@ -483,6 +483,33 @@ def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong
     assert e4.track_id == e.track_id and not tr.last.measured
 
 
+def test_box_association_prefers_a_motion_compensated_box_to_a_last_box_as_it_was():
+    """Car A leaves the view; 0.2 s later car B, a little slower than its prediction and with a new appearance,
+    is where A was last seen. B's motion-compensated box overlaps B's instance (IoU ~0.5) less than A's last box
+    as it was (~0.9), but the moved boxes come first: B keeps its track (crossing s0: a car leaving at the image
+    border took the track of one that had left there 0.8 s before, predicted 5 m out of the image)."""
+    rng = np.random.default_rng(16)
+    a, b = Body(rng, 1001, 60, (1.0, 1.5, 1.0)), Body(rng, 1002, 60, (1.0, 1.5, 1.0))
+    at = lambda x: make_pose(np.eye(3), np.array([x, 0.8, 15.0]))  # noqa: E731
+    objects, trk = ObjectMap(), tracker("objects.filter=false")
+    for i in range(3):
+        trk.track(make_frame(i, [(a, at(-2.6 + 0.8 * i))]), None, objects)
+    ids = {e.instance_id: e.track_id for e in trk.track(make_frame(3, [(a, at(-0.2)), (b, at(-1.5))]), None,
+                                                        objects).estimates}
+    (e4,) = trk.track(make_frame(4, [(b, at(-0.7))]), None, objects).estimates
+    assert e4.track_id == ids[1002] != ids[1001]
+    b.inst, b.desc = 1005, rng.integers(0, 256, b.desc.shape).astype(np.uint8)
+    frame = make_frame(5, [(b, at(-0.2))])  # 0.3 m (8 px) short of its prediction, A's last position
+    uv = frame.keypoints.uv
+    box = np.r_[uv.min(axis=0), uv.max(axis=0)]
+    tr_a, tr_b = objects.tracks[ids[1001]], objects.tracks[ids[1002]]
+    moved_b = trk.predicted_box(tr_b, frame, trk.predicted_pose(tr_b, frame.timestamp),
+                                objects.points.X_o[tr_b.last.pt_ids])
+    assert box_iou(box[None], moved_b[None])[0, 0] < box_iou(box[None], np.asarray(tr_a.last.box2d)[None])[0, 0]
+    (e5,) = trk.track(frame, None, objects).estimates
+    assert e5.track_id == ids[1002]
+
+
 @pytest.mark.parametrize("window_s", [0.5, 0.0])
 def test_box_association_moves_the_last_box_of_a_track_without_velocity_at_its_image_velocity(window_s):
     """A pedestrian measured once and then carried by box joins (its velocity unknown, its prediction standing

@@ -706,8 +706,9 @@ class ObjectTracker:
         """The unseen track measured within `max_gap_s` and with a predicted box (`predicted_box`: not
         passed behind the camera) whose last box, as it was (`_last_box`) or moved by its predicted image motion
         (wrong when the velocity is, or for a near object whose origin projects off its visible part), overlaps
-        `box` most (`_join_overlap`), if that is >= join_iou and no box of the frame's instances that can still
-        join a track (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
+        `box` most (`_join_overlap`; a moved box >= join_iou first, so that the last box of an object that has left
+        where this one is now cannot take it), if that is >= join_iou and no box of the frame's instances that can
+        still join a track (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
         cfg = self.cfg
         if not np.all(np.isfinite(box)):
             return None
@@ -718,8 +719,9 @@ class ObjectTracker:
             return None
         moved = np.array(moved)
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
-        iou = np.maximum(self._join_overlap(box, moved), self._join_overlap(box, last))
-        b = int(np.argmax(iou))
+        iou_moved, iou_last = self._join_overlap(box, moved), self._join_overlap(box, last)
+        iou = np.maximum(iou_moved, iou_last)
+        b = int(np.argmax(iou_moved if iou_moved.max() >= cfg.join_iou else iou))
         if iou[b] < cfg.join_iou:
             return None
         # Mutual best: adjacent instances swapped tracks otherwise, the instances being taken in id order.
