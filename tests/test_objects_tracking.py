@@ -490,7 +490,10 @@ def test_box_association_prefers_a_motion_compensated_box_to_a_last_box_as_it_wa
     border took the track of one that had left there 0.8 s before, predicted 5 m out of the image)."""
     rng = np.random.default_rng(16)
     a, b = Body(rng, 1001, 60, (1.0, 1.5, 1.0)), Body(rng, 1002, 60, (1.0, 1.5, 1.0))
-    at = lambda x: make_pose(np.eye(3), np.array([x, 0.8, 15.0]))  # noqa: E731
+
+    def at(x: float) -> np.ndarray:  # 15 m ahead, `x` m to the right
+        return make_pose(np.eye(3), np.array([x, 0.8, 15.0]))
+
     objects, trk = ObjectMap(), tracker("objects.filter=false")
     for i in range(3):
         trk.track(make_frame(i, [(a, at(-2.6 + 0.8 * i))]), None, objects)
