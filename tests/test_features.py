@@ -306,6 +306,14 @@ def test_stereo_kitti_against_dense_reference(kitti_left, extractor):
     err = np.abs(kp_l.uv[has, 0] - u_right[has] - ref_d)[valid]
     assert valid.sum() > 300
     assert np.median(err) < 0.5, np.median(err)
+    # `split`: two extraction passes in one call, each with its own SAD outlier test, as in two calls.
+    a, b = slice(0, len(kp_l) // 3), slice(len(kp_l) // 3, len(kp_l))
+    split = match_stereo(kp_l, kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, StereoConfig(), split=a.stop)
+    apart = [match_stereo(kp_l.subset(p), kp_r, pyr_l, pyr_r, camera, extractor.scale_factors, StereoConfig())
+             for p in (a, b)]
+    for got, first, second in zip(split, *apart):
+        np.testing.assert_array_equal(got, np.r_[first, second])
+    assert not np.array_equal(split[1], depth)  # the joint median differs on this pair
 
 
 def _shifted_pair(disparity: float, shape=(240, 320), seed: int = 0):

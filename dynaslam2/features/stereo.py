@@ -170,9 +170,12 @@ def match_stereo(
     camera: StereoCamera,
     scale_factors,
     cfg: StereoConfig,
+    split: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Right-image u coordinate and depth (m) of each left keypoint; (N,) float32 each, -1 where none.
-    `scale_factors` (nominal scale per level) sizes the row band; positions use the pyramids' sizes."""
+    `scale_factors` (nominal scale per level) sizes the row band; positions use the pyramids' sizes.
+    `split`: the left keypoints before and from this index (two extraction passes) take the SAD outlier
+    test against the median of their own matches, as if matched in two calls."""
     n = len(kp_left)
     u_right = np.full(n, -1.0, np.float32)
     depth = np.full(n, -1.0, np.float32)
@@ -235,8 +238,12 @@ def match_stereo(
     best_ur[tiny] = u_l[i[tiny]] - 0.01
     if len(i) == 0:
         return u_right, depth
-    median = np.sort(sad)[len(sad) // 2]  # ORB-SLAM2 takes the upper median
-    inlier = sad <= cfg.outlier_sad_factor * median
+    inlier = np.zeros(len(i), bool)
+    for part in ((slice(None),) if split is None else (i < split, i >= split)):
+        part_sad = sad[part]
+        if len(part_sad):
+            median = np.sort(part_sad)[len(part_sad) // 2]  # ORB-SLAM2 takes the upper median
+            inlier[part] = part_sad <= cfg.outlier_sad_factor * median
     i, best_ur, disparity = i[inlier], best_ur[inlier], disparity[inlier]
     u_right[i] = best_ur
     depth[i] = bf / disparity

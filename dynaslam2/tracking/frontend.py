@@ -150,14 +150,14 @@ class FrameBuilder:
         if use_depth:
             u_right, depth = depth_from_image(kp, data.depth, self.camera)
         else:
-            # Each extraction pass is matched on its own, so that its SAD outlier test (relative to the pass's
-            # median) is its own: the static keypoints get `masked` mode's depths, whatever the instances' pass
-            # matched. The added keypoints (objects.densify_*) get depth from the row search only.
-            u_right, depth = np.full(n, -1.0), np.full(n, -1.0)  # float64: the row search writes full precision
-            for part in (slice(0, n_static), slice(n_static, n_first)):
-                if part.stop > part.start:
-                    u_right[part], depth[part] = match_stereo(kp.subset(part), kp_r, pyr_l, pyr_r, self.camera,
-                                                              self.extractor.scale_factors, self.config.stereo)
+            # Each extraction pass takes its own SAD outlier test (`split`): the static keypoints get `masked`
+            # mode's depths, whatever the instances' pass matched. The added keypoints (objects.densify_*) get
+            # depth from the row search only.
+            first = kp if n == n_first else kp.subset(slice(0, n_first))
+            u_right, depth = match_stereo(first, kp_r, pyr_l, pyr_r, self.camera, self.extractor.scale_factors,
+                                          self.config.stereo, split=n_static)
+            none = np.full(n - n_first, -1.0)  # float64 arrays: the row search writes its depths in full precision
+            u_right, depth = np.r_[u_right.astype(np.float64), none], np.r_[depth.astype(np.float64), none]
             if mode == "dynamic" and self.config.stereo.dynamic_row_search:
                 self._row_search(kp, ~static, pyr_l, pyr_r, u_right, depth, data.instances)
         t2 = time.perf_counter()
