@@ -336,7 +336,8 @@ def test_object_creation_thresholds():
 
 
 @pytest.mark.parametrize("key,value", [("min_inliers", 2), ("join_ratio", 1.5), ("max_lost_s", 0),
-                                       ("box_velocity_window_s", -0.1), ("join_contain", 1.5)])
+                                       ("box_velocity_window_s", -0.1), ("join_contain", 1.5),
+                                       ("register_chi2", 0)])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 
@@ -617,11 +618,46 @@ def test_box_association_registers_the_prediction_on_matched_points(register):
         (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
         assert e.track_id == tr.track_id
         errors.append(np.linalg.norm(e.T_w_o[:3, 3] - (T_car[i] @ T_off)[:3, 3]))
-    assert not tr.observations[4].measured
+    assert tr.observations[4].measured == register
     if register:
         assert max(errors) < 0.05, errors
     else:
         assert min(errors) > 1.0, errors
+
+
+def test_box_association_registers_a_far_crossing_car_in_its_stereo_uncertainty():
+    """A car crossing at 30 m (6.7 px of disparity, 0.3 px of disparity noise: ~1.4 m of depth noise) at 1 m per
+    frame, whose appearance changes every frame but for 5 points (too few for a pose or a vote), goes on by box
+    joins. Its 5 matched offsets agree in their stereo uncertainty (across the viewing ray to a few cm), so each
+    join is registered and measures its position: it keeps its id beyond join_max_gap_s and follows the body.
+    With offsets compared in metres (ransac_inlier_m) no join was registered and the track coasted at its first
+    pose until join_max_gap_s lapsed and a new track took the car."""
+    rng = np.random.default_rng(5)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    n = 14
+    T_car = [make_pose(np.eye(3), np.array([-6.0 + 1.0 * i, 0.8, 30.0])) for i in range(n)]
+    trk = tracker()
+    assert n * DT > trk.cfg.join_max_gap_s + 0.4
+    objects = ObjectMap()
+    kept = rng.choice(len(car.desc), 5, replace=False)
+    ids, errors = [], []
+    for i in range(n):
+        if i:
+            new_desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+            new_desc[kept] = car.desc[kept]
+            car.desc = new_desc
+        (e,) = trk.track(noisy_disparity(make_frame(i, [(car, T_car[i])]), rng, 0.3), None, objects).estimates
+        if i == 0:
+            T_off = inverse(T_car[0]) @ e.T_w_o
+        ids.append(e.track_id)
+        p_true = (T_car[i] @ T_off)[:3, 3]
+        ray = p_true / np.linalg.norm(p_true)  # the camera is at the world origin
+        err = e.T_w_o[:3, 3] - p_true
+        errors.append((np.linalg.norm(err - (err @ ray) * ray), abs(err @ ray)))
+    assert ids == [ids[0]] * n
+    errors = np.array(errors)
+    assert errors[:, 0].max() < 0.3, errors  # across the viewing ray (4 px; the filter lags the first frames)
+    assert errors[:, 1].max() < 2.5, errors  # along it: the depth noise of 5 matches, ~0.9 m per frame
 
 
 def test_tracks_are_reported_from_their_min_observations_th_observation_on():

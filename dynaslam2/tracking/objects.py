@@ -292,14 +292,20 @@ class ObjectTracker:
         dt = frame.timestamp - track.last.timestamp
         if dt > 0 and np.linalg.norm(T_w_o[:3, 3] - track.last.T_w_o[:3, 3]) > cfg.max_speed_mps * dt:
             return None
-        if cfg.filter and track.state_mean is not None and np.isfinite(cfg.gate_nis):
-            # Validation gate: a position the filter's prediction cannot explain is an association outlier.
-            m, P = self._predict_state(track, dt)
-            R = self._position_noise(self._pose_information(frame, objects, T_w_o, kp[inliers], pts[inliers])[0])
-            y = T_w_o[:3, 3] - m[:3]
-            if float(y @ np.linalg.solve(P[:3, :3] + R, y)) > cfg.gate_nis:
-                return None
+        if self._gated(track, dt, T_w_o[:3, 3],
+                       lambda: self._pose_information(frame, objects, T_w_o, kp[inliers], pts[inliers])[0]):
+            return None
         return T_w_o, inliers
+
+    def _gated(self, track: ObjectTrack, dt: float, p_w: np.ndarray, information) -> bool:
+        """Validation gate (with the filter and a finite gate_nis): True when the filter's prediction `dt` ahead
+        cannot explain position `p_w` of (3, 3) information `information()` (an association outlier)."""
+        cfg = self.cfg
+        if not (cfg.filter and track.state_mean is not None and np.isfinite(cfg.gate_nis)):
+            return False
+        m, P = self._predict_state(track, dt)
+        y = p_w - m[:3]
+        return float(y @ np.linalg.solve(P[:3, :3] + self._position_noise(information()), y)) > cfg.gate_nis
 
     # ------------------------------------------------------------------ main
     def track(self, frame: Frame, instances: np.ndarray | None, objects: ObjectMap) -> ObjectFrameResult:
@@ -447,10 +453,13 @@ class ObjectTracker:
         return kp[m[:, 1]], pts[m[:, 0]]
 
     def _observe(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o: np.ndarray, kp: np.ndarray,
-                 pts: np.ndarray, instance_id: int, box: np.ndarray, measured: bool = True) -> None:
+                 pts: np.ndarray, instance_id: int, box: np.ndarray, measured: bool = True,
+                 position_info: np.ndarray | None = None) -> None:
         """Record the observation of `track` at `frame`, its velocity from the last observation
         (inverse of eq. 5) when the two are close in time, and refresh the matched points.
-        `measured=False`: `T_w_o` is a prediction (velocities carried over)."""
+        `measured=False`: `T_w_o` is a prediction (velocities carried over). `position_info`: (3, 3)
+        information of a measured position whose rotation is the prediction (a box join's registration),
+        used by the filter instead of the pose-only information."""
         last = track.observations[-1] if track.observations else None
         v_o, w_o = np.zeros(3), np.zeros(3)
         known = False
@@ -463,6 +472,8 @@ class ObjectTracker:
                 v_o, w_o, known = last.v_o.copy(), last.w_o.copy(), track.velocity_known
         if self.cfg.filter:
             info, rot_cov = self._pose_information(frame, objects, T_w_o, kp, pts) if measured else (None, None)
+            if measured and position_info is not None:
+                info, rot_cov = position_info, None
             dt = frame.timestamp - last.timestamp if last is not None else 0.0
             T_w_o = T_w_o.copy()
             if self.cfg.rotation_filter:
@@ -587,25 +598,24 @@ class ObjectTracker:
             if tid is not None:
                 return tid
         # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
-        # goes on at its constant-velocity prediction, registered on the keypoints that match its points;
-        # the instance's other close keypoints become its points. With objects.filter the observation then
-        # keeps the filter's predicted position (the registration places the new points only): taking the
-        # registered position as a filter measurement raised the object ATE on 3 of 4 bench sequences
-        # (static s1 0.26 -> 0.34 m). A prediction that has run off (its points would land far from the track's)
-        # is re-anchored on the instance first (`_reanchor`).
+        # goes on at its constant-velocity prediction, translated by the registration on the keypoints that
+        # match its points (`_register`; a measurement of its position for the filter, with the registration's
+        # information); the instance's other close keypoints become its points. Without a registration the
+        # observation is the prediction; a prediction that has run off (its points would land far from the
+        # track's) is re-anchored on the instance first (`_reanchor`).
         tr = self._join_by_box(frame, objects, unseen, pred, box, boxes,
                                cfg.join_max_gap_s if enough else cfg.coast_max_s)
         if tr is not None:
             if not enough:
                 kp, X_w = kp[:0], X_w[:0]
-            T_w_o, kp_in, pt_in = self._register(frame, objects, tr, pred[tr.track_id], kp, X_w)
+            T_w_o, kp_in, pt_in, info = self._register(frame, objects, tr, pred[tr.track_id], kp, X_w)
             if not len(kp_in) and len(kp):
                 T_w_o = self._reanchor(objects, tr, T_w_o, X_w)
             rest = ~np.isin(kp, kp_in)
             new = objects.add_points(tr.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
                                      frame.keypoints.desc[kp[rest]], self._depth_weight(frame, kp[rest]))
             self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box,
-                          measured=False)
+                          measured=info is not None, position_info=info)
             free[kp] = False
             return tr.track_id
         if len(kp) < cfg.min_new_points and not (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
@@ -660,25 +670,51 @@ class ObjectTracker:
         return tid
 
     def _register(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
-                  kp: np.ndarray, X_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  kp: np.ndarray, X_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """The predicted pose of `track` translated so that its points matched to keypoints `kp` (world
-        points `X_w`) land on them, with the inlier keypoints and points: the mean offset of the matches
-        within ransac_inlier_m of the median offset, when >= register_min_matches. Else the prediction and
-        no match: points added at a wrong prediction disagree with the object's others, and the next
-        pose-only optimizations jump between the two sets."""
+        points `X_w`) land on them, the inlier keypoints and points, and the (3, 3) information of the
+        translation: the information-weighted mean of the offsets that lie within register_chi2 of it in
+        their stereo uncertainty (`_offset_information`; iterated from the median offset), when >=
+        register_min_matches and the validation gate passes (`_gated`). Else the prediction, no match and None:
+        points added at a wrong prediction disagree with the object's others, and the next pose-only optimizations
+        jump between the two sets."""
         cfg = self.cfg
         none = np.zeros(0, np.int64)
         pts = objects.points.of_track(track.track_id)
         m = match_descriptors(objects.points.desc[pts], frame.keypoints.desc[kp], cfg.bf_max_distance, cfg.bf_nn_ratio)
         if len(m) < cfg.register_min_matches:
-            return T_w_o_pred, none, none
-        offset = X_w[m[:, 1]] - (objects.points.X_o[pts[m[:, 0]]] @ T_w_o_pred[:3, :3].T + T_w_o_pred[:3, 3])
-        inl = np.linalg.norm(offset - np.median(offset, axis=0), axis=1) < cfg.ransac_inlier_m
-        if np.count_nonzero(inl) < cfg.register_min_matches:
-            return T_w_o_pred, none, none
+            return T_w_o_pred, none, none, None
+        kp_m, pt_m = kp[m[:, 1]], pts[m[:, 0]]
+        offset = X_w[m[:, 1]] - (objects.points.X_o[pt_m] @ T_w_o_pred[:3, :3].T + T_w_o_pred[:3, 3])
+        W = self._offset_information(frame, objects, kp_m, pt_m, X_w[m[:, 1]])
+        shift = np.median(offset, axis=0)
+        for _ in range(3):
+            r = offset - shift
+            inl = np.einsum("ni,nij,nj->n", r, W, r) < cfg.register_chi2
+            if np.count_nonzero(inl) < cfg.register_min_matches:
+                return T_w_o_pred, none, none, None
+            info = W[inl].sum(axis=0)
+            shift = np.linalg.solve(info, np.einsum("nij,nj->i", W[inl], offset[inl]))
         T_w_o = T_w_o_pred.copy()
-        T_w_o[:3, 3] += offset[inl].mean(axis=0)
-        return T_w_o, kp[m[inl, 1]], pts[m[inl, 0]]
+        T_w_o[:3, 3] += shift
+        if self._gated(track, frame.timestamp - track.last.timestamp, T_w_o[:3, 3], lambda: info):
+            return T_w_o_pred, none, none, None
+        return T_w_o, kp_m[inl], pt_m[inl], info
+
+    def _offset_information(self, frame: Frame, objects: ObjectMap, kp: np.ndarray, pts: np.ndarray,
+                            X_w: np.ndarray) -> np.ndarray:
+        """(K, 3, 3) information of the offsets between the stereo points `X_w` of keypoints `kp` and their
+        object points `pts` placed by a pose: along the viewing ray the sum of the two depth variances (the
+        keypoint's, `_depth_weight`, and the point's fused information), across it 1 px at the keypoint's level
+        for each."""
+        ray = X_w - frame.T_w_c[:3, 3]
+        dist = np.linalg.norm(ray, axis=1)
+        ray /= np.maximum(dist, 1e-9)[:, None]
+        with np.errstate(divide="ignore"):
+            var_along = 1.0 / self._depth_weight(frame, kp) + 1.0 / objects.points.weight[pts]
+        var_across = 2.0 * dist**2 / (self.camera.fx**2 * self.inv_level_sigma2[frame.keypoints.octave[kp]])
+        along = ray[:, :, None] * ray[:, None, :]
+        return along / var_along[:, None, None] + (np.eye(3) - along) / var_across[:, None, None]
 
     def _reanchor(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray) -> np.ndarray:
         """The pose at which a box join adds the instance's points `X_w` to `track`: the prediction, or, when
