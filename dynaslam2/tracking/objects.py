@@ -19,6 +19,7 @@ their box overlaps the box of an object of their class seen in the previous fram
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -297,7 +298,7 @@ class ObjectTracker:
             return None
         return T_w_o, inliers
 
-    def _gated(self, track: ObjectTrack, dt: float, p_w: np.ndarray, information) -> bool:
+    def _gated(self, track: ObjectTrack, dt: float, p_w: np.ndarray, information: Callable[[], np.ndarray]) -> bool:
         """Validation gate (with the filter and a finite gate_nis): True when the filter's prediction `dt` ahead
         cannot explain position `p_w` of (3, 3) information `information()` (an association outlier)."""
         cfg = self.cfg
@@ -471,9 +472,12 @@ class ObjectTracker:
             elif not measured:
                 v_o, w_o, known = last.v_o.copy(), last.w_o.copy(), track.velocity_known
         if self.cfg.filter:
-            info, rot_cov = self._pose_information(frame, objects, T_w_o, kp, pts) if measured else (None, None)
-            if measured and position_info is not None:
+            if not measured:
+                info, rot_cov = None, None
+            elif position_info is not None:
                 info, rot_cov = position_info, None
+            else:
+                info, rot_cov = self._pose_information(frame, objects, T_w_o, kp, pts)
             dt = frame.timestamp - last.timestamp if last is not None else 0.0
             T_w_o = T_w_o.copy()
             if self.cfg.rotation_filter:
