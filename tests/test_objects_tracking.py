@@ -660,6 +660,29 @@ def test_box_association_registers_a_far_crossing_car_in_its_stereo_uncertainty(
     assert errors[:, 1].max() < 2.5, errors  # along it: the depth noise of 5 matches, ~0.9 m per frame
 
 
+@pytest.mark.parametrize("where", ["predicted", "elsewhere"])
+def test_a_vote_whose_pose_fails_joins_a_track_its_box_touches(where):
+    """A car hidden for 1.1 s (beyond join_max_gap_s: no box join) comes back with its descriptors, but its
+    stored points were made 1 m off each (far-away stereo), so no pose fits the vote's matches. It keeps its
+    track when it comes back where its track's box is; back 8.8 m to the side (its box touches neither the track's
+    last nor its predicted box) it starts a new track, as a vote without a pose did before."""
+    rng = np.random.default_rng(21)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-1.0 + 0.2 * i, 0.8, 20.0])) for i in range(15)]
+    objects, trk = ObjectMap(), tracker()
+    e = track_alone(trk, objects, car, T_car[:4])
+    P = objects.points
+    ids = P.of_track(e.track_id)
+    P.X_o[ids] += rng.uniform(-1.0, 1.0, (len(ids), 3))
+    for i in range(4, 14):
+        trk.track(make_frame(i, []), None, objects)
+    assert 13 * DT - 3 * DT > trk.cfg.join_max_gap_s
+    T_back = T_car[14] if where == "predicted" else T_car[14] @ make_pose(np.eye(3), np.array([-8.8, 0.0, 0.0]))
+    trk.track(make_frame(14, [(car, T_back)]), None, objects)
+    (back,) = [tr for tr in objects.tracks.values() if tr.last.frame_index == 14]
+    assert (back.track_id == e.track_id) == (where == "predicted")
+
+
 def test_tracks_are_reported_from_their_min_observations_th_observation_on():
     """estimates(min_observations=2): a track is output from its second observation on, and a later query of
     the frame of its first observation still leaves it out (the output is the same whenever it is read)."""

@@ -589,16 +589,17 @@ class ObjectTracker:
                     free: np.ndarray) -> int | None:
         """An unclaimed instance (`points`: its `_instance_points`): joins an unseen track (point votes with
         >= min_inliers close keypoints, then box IoU with a track measured within join_max_gap_s, or within
-        coast_max_s when the instance has fewer close keypoints: no points then) or, with >=
-        min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
-        small_new_fraction of its keypoints), creates an object at the centroid of its points with
-        identity rotation (III-B)."""
+        coast_max_s when the instance has fewer close keypoints: no points then, then the voted track whose
+        pose failed when the instance's box touches its box) or, with >= min_new_points close keypoints (or, on
+        a small instance, >= min_inliers that are >= small_new_fraction of its keypoints), creates an object at
+        the centroid of its points with identity rotation (III-B)."""
         cfg = self.cfg
         kp, X_w, n_instance = points
         enough = len(kp) >= cfg.min_inliers
         # Track ids from point votes: most matched keypoints belong to one map object.
-        if unseen and enough:
-            tid = self._join_by_points(frame, objects, unseen, pred, inst, box, kp, X_w, free)
+        voted = self._vote(frame, objects, unseen, kp) if unseen and enough else None
+        if voted is not None:
+            tid = self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted)
             if tid is not None:
                 return tid
         # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
@@ -607,8 +608,12 @@ class ObjectTracker:
         # information); the instance's other close keypoints become its points. Without a registration the
         # observation is the prediction; a prediction that has run off (its points would land far from the
         # track's) is re-anchored on the instance first (`_reanchor`).
+        # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join when
+        # the instance's box touches the voted track's (`_touches`), e.g. after the box join's window lapsed.
         tr = self._join_by_box(frame, objects, unseen, pred, box, boxes,
                                cfg.join_max_gap_s if enough else cfg.coast_max_s)
+        if tr is None and voted is not None and self._touches(frame, objects, voted[0], pred[voted[0].track_id], box):
+            tr = voted[0]
         if tr is not None:
             if not enough:
                 kp, X_w = kp[:0], X_w[:0]
@@ -641,10 +646,10 @@ class ObjectTracker:
         ok = self._compact(X_w)
         return kp[ok], X_w[ok], n_instance
 
-    def _join_by_points(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
-                        inst: int, box: np.ndarray, kp: np.ndarray, X_w: np.ndarray, free: np.ndarray) -> int | None:
-        """The instance's close keypoints `kp` (world points `X_w`) mostly match the points of one
-        unseen map object: its pose from those matches, the other keypoints become its points."""
+    def _vote(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack],
+              kp: np.ndarray) -> tuple[ObjectTrack, np.ndarray, np.ndarray] | None:
+        """The unseen map object whose points most of the instance's close keypoints `kp` match (>= min_join_matches
+        and >= join_ratio of the matches), with those matches (keypoints, points), or None."""
         cfg = self.cfg
         ids = np.array([tr.track_id for tr in unseen])
         pts = objects.points.of_tracks(ids)
@@ -657,14 +662,20 @@ class ObjectTracker:
         b = int(np.argmax(votes))
         if votes[b] < cfg.min_join_matches or votes[b] < cfg.join_ratio * len(m):
             return None
-        tid = int(votes_id[b])
-        sel = owner == tid
-        tr = objects.tracks[tid]
-        est = self.estimate_pose(frame, objects, tr, pred[tid], kp[m[sel, 1]], pts[m[sel, 0]], True)
+        sel = owner == votes_id[b]
+        return objects.tracks[int(votes_id[b])], kp[m[sel, 1]], pts[m[sel, 0]]
+
+    def _join_by_points(self, frame: Frame, objects: ObjectMap, pred: dict[int, np.ndarray], inst: int,
+                        box: np.ndarray, kp: np.ndarray, X_w: np.ndarray, free: np.ndarray, tr: ObjectTrack,
+                        kp_m: np.ndarray, pt_m: np.ndarray) -> int | None:
+        """The instance (close keypoints `kp`, world points `X_w`) joins the voted object `tr` (`_vote`: matches
+        keypoints `kp_m` <-> points `pt_m`) when a pose fits those matches; the other keypoints become its points."""
+        tid = tr.track_id
+        est = self.estimate_pose(frame, objects, tr, pred[tid], kp_m, pt_m, True)
         if est is None:
             return None
         T_w_o, inl = est
-        kp_in, pt_in = kp[m[sel, 1]][inl], pts[m[sel, 0]][inl]
+        kp_in, pt_in = kp_m[inl], pt_m[inl]
         self._fuse_points(frame, objects, T_w_o, kp_in, pt_in)
         rest = ~np.isin(kp, kp_in)
         new = objects.add_points(tid, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3], frame.keypoints.desc[kp[rest]],
@@ -672,6 +683,15 @@ class ObjectTracker:
         self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box)
         free[kp] = False
         return tid
+
+    def _touches(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                 box: np.ndarray) -> bool:
+        """Whether `box` overlaps the track's last box (`_last_box`) or its predicted box at all: a vote whose pose
+        failed joins only a track that could be there (a false vote took a bus leaving at the right border to an
+        instance entering at the left)."""
+        moved = self.predicted_box(track, frame, T_w_o_pred, objects.points.X_o[track.last.pt_ids])
+        track_boxes = [self._last_box(track, frame.timestamp)] + ([moved] if moved is not None else [])
+        return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
 
     def _register(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
                   kp: np.ndarray, X_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
