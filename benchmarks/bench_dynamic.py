@@ -4,8 +4,8 @@ end-to-end fps and median local BA per keyframe of each mode. The object figures
 every listed object within 30 m (eval's defaults), and the paper's Table IV selection within 30 m
 (`PAPER_PROTOCOL`: frames where the object is unoccluded, untruncated and >= 40 px high; columns "p*").
 Issue 4's id criteria (`UNOCCLUDED_PROTOCOL`): "uidsw", the id switches while the object is unoccluded
-(KITTI occlusion level 0) within 30 m; "gaps", occlusions of <= 1 s (tracked before and after) that
-kept the id / all of them.
+(KITTI occlusion level 0) within 30 m, each listed after the table (GT track, frame, estimated ids); "gaps",
+occlusions of <= 1 s (tracked before and after) that kept the id / all of them.
 
     python benchmarks/bench_dynamic.py [--scenarios traffic crossing following static] [--seeds 0 1]
         [--frames 150] [--size 640x480] [--modes static masked dynamic] [--work DIR] [--set k=v ...]
@@ -76,7 +76,8 @@ def run_mode(seq, data: list, mode: str, overrides: list[str]) -> dict:
             out.update(p_obj_ate=p["ate_rmse_m"], p_tp=p["tp_ratio"], p_id_sw=p["id_switches"],
                        p_gt_tracks=p["gt_tracks"])
             u = evaluate_objects(seq, objects, T, UNOCCLUDED_PROTOCOL)
-            out.update(u_id_sw=u["id_switches"], gaps=u["short_gaps"], gaps_kept=u["short_gaps_kept"])
+            out.update(u_id_sw=u["id_switches"], gaps=u["short_gaps"], gaps_kept=u["short_gaps_kept"],
+                       u_switches=[(gid, *s) for gid, row in u["per_track"].items() for s in row["id_switch_frames"]])
     return out
 
 
@@ -134,6 +135,10 @@ def main() -> None:
                   f"id switches {sum(d[k + 'id_sw'] for d in dyn)}, GT tracks {sum(d[k + 'gt_tracks'] for d in dyn)}")
         print(f"objects, issue 4's id criteria: id switches while unoccluded {sum(d['u_id_sw'] for d in dyn)}, "
               f"occlusions <= 1 s keeping the id {sum(d['gaps_kept'] for d in dyn)}/{sum(d['gaps'] for d in dyn)}")
+        for scenario, seed, r in rows:
+            for gid, frame, old_id, new_id in r["dynamic"].get("u_switches", []):
+                print(f"  unoccluded id switch: {scenario} seed {seed}, GT track {gid} at frame {frame}: "
+                      f"estimated track {old_id} -> {new_id}")
     if {"masked", "dynamic"} <= set(modes):
         better = sum(r["dynamic"]["ate"] <= r["masked"]["ate"] for _, _, r in rows)
         print(f"dynamic ego ATE <= masked on {better}/{len(rows)} sequences")

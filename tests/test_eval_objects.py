@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -174,8 +175,10 @@ def test_id_switch_reid_after_occlusion_missing_track_and_range():
     t1, t2, t3 = (m["per_track"][k] for k in ("1", "2", "3"))
     assert t1["matched_est_id"] == 10 and t1["tp_ratio"] == pytest.approx(18 / 30)
     assert t1["id_switches"] == 1 and t1["reid_switches"] == 0 and t1["max_gap_s"] == 0.0
+    assert t1["id_switch_frames"] == [[18, 10, 11]] and t1["reid_switch_frames"] == []
     assert t2["visible_frames"] == 26 and t2["matched_est_id"] == 21 and t2["tp_ratio"] == pytest.approx(14 / 26)
     assert t2["id_switches"] == 0 and t2["reid_switches"] == 1 and t2["max_gap_s"] == pytest.approx(0.5)
+    assert t2["id_switch_frames"] == [] and t2["reid_switch_frames"] == [[16, 20, 21]]
     assert t3["matched_est_id"] is None and t3["tp_ratio"] == 0.0 and t3["ate_m"] is None
     assert m["gt_tracks"] == 3 and m["matched_tracks"] == 2 and m["est_tracks"] == 6
     assert m["id_switches"] == 1 and m["reid_switches"] == 1
@@ -411,6 +414,7 @@ def test_cli_eval_scores_objects_end_to_end(tmp_path, capsys):
     direct = evaluate_scene(scene, est, T_w_c_est)
     assert m["objects"]["ate_rmse_m"] == pytest.approx(direct["ate_rmse_m"], abs=1e-6)
     assert m["objects"]["per_track"]["2"]["id_switches"] == 1
+    assert m["objects"]["per_track"]["2"]["id_switch_frames"] == [[15, 5, 6]]
     assert m["objects"]["per_track"]["2"]["tp_ratio"] == pytest.approx(15 / 20)
     assert m["objects"]["per_track"]["3"]["matched_est_id"] is None
     assert m["objects"]["gt_tracks"] == 3 and m["objects"]["matched_tracks"] == 2
@@ -422,6 +426,7 @@ def test_cli_eval_scores_objects_end_to_end(tmp_path, capsys):
                 "objects.per_track.2.matched_est_id", "objects.id_switches", "ego.ate_rmse_m"):
         assert key in out
     assert format_table(m) in out
+    assert re.search(r"objects\.per_track\.2\.id_switch_frames +\[\[15, 5, 6\]\]", out)
     # A run without objects (static/masked) has no objects section.
     write_run(tmp_path / "static", scene, None, T_w_c_est)
     assert "objects" not in evaluate(tmp_path / "seq", tmp_path / "static")

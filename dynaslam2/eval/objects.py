@@ -31,8 +31,9 @@ Definitions (parameters in ObjectEvalConfig):
 - id_switches: along the visible frames where some estimate overlaps the GT track, the best overlapping
   estimate (instance match first, then IoU, then more points) changes while the GT was eligible in every
   frame in between; reid_switches: it changes across frames where the GT was not eligible (occluded,
-  out of view or beyond range). max_gap_s: the longest time between two consecutive visible frames of
-  the track that are not adjacent (0 when it is visible in one run).
+  out of view or beyond range). id_switch_frames / reid_switch_frames: each switch as [frame, previous
+  estimated id, new estimated id], the frame being the first of the new id. max_gap_s: the longest time
+  between two consecutive visible frames of the track that are not adjacent (0 when it is visible in one run).
 - short_gaps: the gaps of at most `short_gap_s` between two consecutive visible frames that are not
   adjacent, where some estimate overlaps the GT in the run of adjacent visible frames before the gap and in
   the run after it; short_gaps_kept: those where the best overlapping estimate of the last such frame before
@@ -40,8 +41,8 @@ Definitions (parameters in ObjectEvalConfig):
   track id"; with `UNOCCLUDED_PROTOCOL` a gap is a run of frames where the object is occluded, hidden
   or beyond range).
 - per_track.<gt_id>: ate_m, ate_cam_m, rpe_t, rpe_r, tp_ratio, matched_est_id, visible_frames,
-  matched_frames, offset_m (|d|), id_switches, reid_switches, max_gap_s, short_gaps, short_gaps_kept
-  (null where undefined).
+  matched_frames, offset_m (|d|), id_switches, reid_switches, id_switch_frames, reid_switch_frames, max_gap_s,
+  short_gaps, short_gaps_kept (null where undefined).
 - Totals: ate_rmse_m, ate_cam_rmse_m, rpe_*: means over the matched tracks (rpe over those with a
   pair); tp_ratio: mean over the scored GT tracks; id_switches, reid_switches, short_gaps,
   short_gaps_kept: sums.
@@ -281,13 +282,11 @@ def _switches(frames: np.ndarray, assigned: list[int | None], timestamps: np.nda
     """id_switches / reid_switches / max_gap_s / short_gaps / short_gaps_kept of one GT track (module docstring)."""
     position = {int(f): k for k, f in enumerate(frames)}  # rank among the track's eligible frames
     tracked = [(int(f), a) for f, a in zip(frames, assigned) if a is not None]
-    id_switches = reid_switches = 0
+    id_switch_frames, reid_switch_frames = [], []
     for (f1, a1), (f2, a2) in zip(tracked[:-1], tracked[1:]):
         if a1 != a2:
-            if position[f2] - position[f1] == f2 - f1:
-                id_switches += 1
-            else:
-                reid_switches += 1
+            kind = id_switch_frames if position[f2] - position[f1] == f2 - f1 else reid_switch_frames
+            kind.append([f2, a1, a2])
     # Runs of adjacent eligible frames; a gap lies between two runs, its ends are the last estimate reported in
     # the run before it and the first one in the run after it (a track reported a frame late still counts).
     starts = np.r_[0, np.flatnonzero(np.diff(frames) > 1) + 1, len(frames)]
@@ -295,7 +294,8 @@ def _switches(frames: np.ndarray, assigned: list[int | None], timestamps: np.nda
     gaps = [(timestamps[frames[j]] - timestamps[frames[j - 1]], r1[-1] if r1 else None, r2[0] if r2 else None)
             for j, r1, r2 in zip(starts[1:-1], runs[:-1], runs[1:])]
     short = [(a1, a2) for dt, a1, a2 in gaps if dt <= short_gap_s + 1e-9 and a1 is not None and a2 is not None]
-    return {"id_switches": id_switches, "reid_switches": reid_switches,
+    return {"id_switches": len(id_switch_frames), "reid_switches": len(reid_switch_frames),
+            "id_switch_frames": id_switch_frames, "reid_switch_frames": reid_switch_frames,
             "max_gap_s": float(max((dt for dt, _, _ in gaps), default=0.0)),
             "short_gaps": len(short), "short_gaps_kept": sum(a1 == a2 for a1, a2 in short)}
 

@@ -77,8 +77,9 @@ def _flatten(tree: dict, prefix: str = "") -> list[tuple[str, object]]:
 
 
 def format_table(metrics: dict) -> str:
-    """Two-column text table of the metrics, one dotted key per line."""
-    rows = [(name, "-" if v is None else v if isinstance(v, int) else f"{v:.4f}") for name, v in _flatten(metrics)]
+    """Two-column text table of the metrics, one dotted key per line (lists, e.g. a track's switch frames, as JSON)."""
+    rows = [(name, "-" if v is None else v if isinstance(v, int) else json.dumps(v) if isinstance(v, list)
+             else f"{v:.4f}") for name, v in _flatten(metrics)]
     width = max(len(name) for name, _ in rows)
     lines = [f"{'metric':<{width}}  value", f"{'-' * width}  -----"]
     lines += [f"{name:<{width}}  {value}" for name, value in rows]
