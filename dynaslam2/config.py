@@ -81,10 +81,15 @@ class StereoConfig:
     # behind it lies at another disparity), with >= row_search_min_support of the window on it. On the
     # pedestrian keypoints left without depth by match_stereo (sim crossing s0, 30 frames, 1060 keypoints with
     # objects.densify_features=500, rendered depth as reference): depths found 331 -> 396, within 1 px 94 % ->
-    # 98 % (support 0.3: 312). Off by default: end to end (traffic and following s0/s1, no densify) it raised
-    # the object ATE 0.249 -> 0.296 m for TP 0.79 -> 0.80; the depths it adds are mostly of outline corners,
-    # which slide with the background (see objects.densify_features).
-    row_search_instance_mask: bool = False
+    # 98 % (support 0.3: 312). A pedestrian of 12 x 44 px at 16 m (crossing s7) had a depth on 0-5 of its 6-17
+    # keypoints per frame with the whole window, 2-13 with its own pixels. bench_dynamic's four scenarios (world 2,
+    # 150 fr, 640x480), False -> True: seeds 0-4 id switches while unoccluded 1 -> 0, all 29 -> 23, TP 0.804 ->
+    # 0.821, object ATE 0.212 -> 0.228 m, short gaps kept 29/31 -> 29/33 (more pedestrian tracks, more gaps), ego
+    # ATE 0.0212 -> 0.0222 m; seeds 5-9 1 -> 0, 11 -> 12, 0.830 -> 0.838, 0.193 -> 0.198 m, 21/21 -> 21/21,
+    # 0.0269 -> 0.0279 m; following seeds 10-19 0 -> 0, 1 -> 2, TP 0.790 -> 0.810, 0.156 -> 0.173 m, ego 0.0274 ->
+    # 0.0262 m. (Measured before world 2 on traffic and following s0/s1 alone, it had raised the object ATE 0.249
+    # -> 0.296 m for TP 0.79 -> 0.80; the depths it adds are mostly of outline corners, see objects.densify_features.)
+    row_search_instance_mask: bool = True
     row_search_min_support: float = 0.15
 
     def validate(self) -> None:
