@@ -689,7 +689,7 @@ def test_stereo_row_search_on_narrow_objects_scores_their_own_pixels():
 
 @pytest.mark.parametrize("instance_sad", [True, False])
 def test_dynamic_frames_give_narrow_objects_their_own_depth(instance_sad):
-    """The `dynamic` mode's frame builder (default config: stereo.row_search_instance_mask) gives most keypoints
+    """The `dynamic` mode's frame builder (default config: stereo.row_search_instance_mask) gives half the keypoints
     on objects narrower than the SAD window (a pedestrian at ~15 m at 640x480) the object's depth; scoring the
     whole window (False) gives far fewer of them one (`test_stereo_row_search_on_narrow_objects_...`)."""
     left, right, labels = _narrow_objects_pair()
