@@ -17,7 +17,9 @@ camera geometry is `--size 1242x375 --sim-set fx=721.5` (baseline 0.54 m is the 
 Sequences are generated once into --work (default /tmp/bench_dynamic) and reused. For each sequence
 the modes run one after the other on frames loaded beforehand (disk reads are not SLAM time); fps =
 frames / summed per-frame `total` (tracking + objects + local mapping + BA, one process). Timings on
-a shared machine move with its load: compare modes within one sequence.
+a shared machine move with its load: compare modes within one sequence. What dominates: the mean ms
+per frame of each stage of System.process (features = ORB, stereo = matching and row search, tracking
+= camera, objects = object tracking, local_ba = local mapping with its BA), and dynamic minus static.
 """
 
 from __future__ import annotations
@@ -54,6 +56,10 @@ def ensure_sequence(work: Path, scenario: str, seed: int, frames: int, size: str
     return out
 
 
+# System.process's per-frame timings (timing.csv's stages; "local_ba" is the whole local mapping of a keyframe)
+STAGES = ("features", "stereo", "tracking", "objects", "local_ba", "total")
+
+
 def run_mode(seq, data: list, mode: str, overrides: list[str]) -> dict:
     system = System(load_config(None, overrides + [f"mode={mode}"]), seq.camera)
     estimates = [system.process(frame) for frame in data]
@@ -65,6 +71,7 @@ def run_mode(seq, data: list, mode: str, overrides: list[str]) -> dict:
         "ba_ms": float(np.median(ba)) if ba else 0.0,
         "lost": sum(e.state == "lost" for e in estimates),
         "objects_ms": float(np.median([e.timing_ms["objects"] for e in estimates])),
+        "stage_ms": {k: float(np.mean([e.timing_ms[k] for e in estimates])) for k in STAGES},
     }
     if mode == "dynamic":
         objects = [e.objects for e in estimates]
@@ -147,6 +154,13 @@ def main() -> None:
         print("dynamic/static ego ATE: " + ", ".join(f"{s}{k}: {x:.2f}" for (s, k, _), x in zip(rows, ratio)))
         fps = [r["dynamic"]["fps"] / r["static"]["fps"] for _, _, r in rows]
         print(f"dynamic/static fps: median {np.median(fps):.2f}")
+    print("ms per frame by stage (each sequence's mean, median over sequences):")
+    for m in modes:
+        print(f"  {m:8s} " + ", ".join(f"{k} {np.median([r[m]['stage_ms'][k] for _, _, r in rows]):.1f}"
+                                       for k in STAGES))
+    if {"static", "dynamic"} <= set(modes):
+        extra = {k: [r["dynamic"]["stage_ms"][k] - r["static"]["stage_ms"][k] for _, _, r in rows] for k in STAGES}
+        print("  dynamic - static: " + ", ".join(f"{k} {np.median(v):+.1f}" for k, v in extra.items()))
 
 
 if __name__ == "__main__":
