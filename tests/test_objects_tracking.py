@@ -507,8 +507,7 @@ def test_box_association_prefers_a_motion_compensated_box_to_a_last_box_as_it_wa
     uv = frame.keypoints.uv
     box = np.r_[uv.min(axis=0), uv.max(axis=0)]
     tr_a, tr_b = objects.tracks[ids[1001]], objects.tracks[ids[1002]]
-    moved_b = trk.predicted_box(tr_b, frame, trk.predicted_pose(tr_b, frame.timestamp),
-                                objects.points.X_o[tr_b.last.pt_ids])
+    moved_b = trk.predicted_box(tr_b, frame, trk.predicted_pose(tr_b, frame.timestamp), objects)
     assert box_iou(box[None], moved_b[None])[0, 0] < box_iou(box[None], np.asarray(tr_a.last.box2d)[None])[0, 0]
     (e5,) = trk.track(frame, None, objects).estimates
     assert e5.track_id == ids[1002]
@@ -589,8 +588,7 @@ def test_box_association_skips_an_object_the_camera_has_passed():
     T_second = T_first @ make_pose(np.eye(3), np.array([0.0, 0.0, 12.0]))  # 5 m ahead at frame 9, as the first at 3
     frame = make_frame(9, [(second, T_second)], camera_at(12))
     tr = objects.tracks[e.track_id]
-    X_o = objects.points.X_o[tr.last.pt_ids]
-    assert trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), X_o) is None
+    assert trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects) is None
     ids = [x.track_id for x in trk.track(frame, None, objects).estimates]
     assert len(ids) == 1 and ids[0] != e.track_id
 
@@ -788,7 +786,7 @@ def test_predicted_box_follows_an_approaching_object_out_of_the_image():
     truth = np.r_[uv.min(axis=0), uv.max(axis=0)]
     X_c = car.X_b + T_car[4][:3, 3]
     assert np.any(CAMERA.project(X_c)[:, 0] > CAMERA.width)  # the car is cut by the image border
-    box = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects.points.X_o[tr.last.pt_ids])
+    box = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
     assert np.all(box >= 0) and box[2] <= CAMERA.width - 1 and box[3] <= CAMERA.height - 1
     last = np.asarray(tr.last.box2d)
     assert box_iou(box[None], truth[None])[0, 0] > 0.9 > 0.7 > box_iou(last[None], truth[None])[0, 0]

@@ -148,10 +148,10 @@ class ObjectTracker:
         return w_o * (self.cfg.max_angular_speed / speed) if speed > self.cfg.max_angular_speed else w_o
 
     def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray,
-                      X_o: np.ndarray) -> np.ndarray | None:
+                      objects: ObjectMap) -> np.ndarray | None:
         """The object's last 2D box carried into `frame` (instance-to-instance association with motion
-        compensation), clipped to the image: it follows the mean projection of the object points `X_o`
-        (object frame; those of the last observation) from the last pose and camera to the predicted
+        compensation), clipped to the image: it follows the mean projection of the object points of the last
+        observation (X_o, in `objects`) from the last pose and camera to the predicted
         pose and this camera, and scales by the median ratio of their depths (an approaching object's
         box grows; a turn that changes its outline does not count). With fewer than 3 of the points in
         front of both cameras the object-frame origin moves it; the last box as it was when neither can.
@@ -161,6 +161,7 @@ class ObjectTracker:
         if last.box2d is None:
             return None
         box = np.asarray(last.box2d, dtype=float)
+        X_o = objects.points.X_o[last.pt_ids]
         motion = None
         if last.T_c_w is not None:
             if not np.any(transform(frame.T_c_w @ T_w_o_pred, np.vstack([X_o, np.zeros((1, 3))]))[:, 2] > 1e-3):
@@ -439,7 +440,7 @@ class ObjectTracker:
         """(b): brute-force matching of the object's points with the keypoints of the instance that
         overlaps its (motion-compensated) last box most (the object was seen in the previous frames)."""
         cfg = self.cfg
-        box = self.predicted_box(track, frame, T_w_o_pred, objects.points.X_o[track.last.pt_ids])
+        box = self.predicted_box(track, frame, T_w_o_pred, objects)
         if frame.timestamp - track.last.timestamp > cfg.max_velocity_gap_s or box is None or len(inst_ids) == 0:
             return None
         iou = box_iou(box[None], boxes)[0]
@@ -689,7 +690,7 @@ class ObjectTracker:
         """Whether `box` overlaps the track's last box (`_last_box`) or its predicted box at all: a vote whose pose
         failed joins only a track that could be there (a false vote took a bus leaving at the right border to an
         instance entering at the left)."""
-        moved = self.predicted_box(track, frame, T_w_o_pred, objects.points.X_o[track.last.pt_ids])
+        moved = self.predicted_box(track, frame, T_w_o_pred, objects)
         track_boxes = [self._last_box(track, frame.timestamp)] + ([moved] if moved is not None else [])
         return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
 
@@ -773,7 +774,7 @@ class ObjectTracker:
         if not np.all(np.isfinite(box)):
             return None
         recent = [tr for tr in unseen if frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
-        moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects.points.X_o[tr.last.pt_ids]) for tr in recent]
+        moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects) for tr in recent]
         recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
         if not recent:
             return None
