@@ -7,7 +7,7 @@ Runs the `dynamic` mode on simulated sequences (bench_dynamic's, generated once 
 given to the BA with objects (mapping.objects.object_local_ba) is also solved, from the same input, as
 - "static": the static local BA alone (the objects left out: paper III-D's camera-weak-only case), for the
   joint windows (camera and objects weak);
-- "no eq4": the same BA with eq. (4)-(5) switched off (optim.objects.sigma_motion_xyz = 1e4), the only terms
+- "no eq4": the same BA with eq. (4)-(5) made negligible (optim.objects.sigma_motion_xyz = 1e4), the only terms
   through which the objects reach the cameras (eq. 2 is on T_o_c, object_ba's docstring);
 and the run goes on with the BA's own result. For each: the keyframe-to-keyframe camera error against ground
 truth (eval.trajectory.rpe's translation error over the window's keyframes in time order, on the pairs with a
