@@ -438,13 +438,14 @@ class ObjectsConfig:
     max_point_spread_m: float = 5.0
     # (a) projection search under the constant-velocity prediction: radius (px at level 0, scaled by the keypoint
     # level), descriptor ratio; fewer matches than min_projection_matches -> (b). Lower lets a track lost for longer
-    # than max_velocity_gap_s (no (b) then) retake its object on a few matches, and a wrong track take a
-    # neighbour's: bench_dynamic's four scenarios (world 2, 150 fr, 640x480), 8 -> 6: seeds 0-4 short gaps kept
+    # than max_velocity_gap_s (no (b) then) retake its object on a few matches (crossing s3's pedestrian emerging
+    # after 1.5 s): bench_dynamic's four scenarios (world 2, 150 fr, 640x480), 8 -> 6: seeds 0-4 short gaps kept
     # 29/33 -> 31/33, id switches 23 -> 20 (unoccluded 0 -> 0), object ATE 0.228 -> 0.239 m, TP 0.821 -> 0.826;
     # seeds 5-9 21/21 either way, 12 -> 13 (0 -> 0), 0.198 -> 0.204 m; following seeds 10-19 2 -> 3 switches
-    # (unoccluded 0 -> 1: a car leaving at the border taken by the track of another car, lost 0.8 s), 0.173 -> 0.178
-    # m. Left at 8 for the unoccluded switch. (Keeping (a)'s 6-7 matches only when (b) finds none: the same gaps,
-    # unoccluded switches 0 -> 1 on seeds 0-4 and on 10-19.)
+    # (unoccluded 0 -> 1: s17 f55, a car's own track failed its pose at the left border (it succeeded there at 8:
+    # the runs' point sets differ by then), and a point vote gave the instance to another car's track, lost 0.8 s),
+    # 0.173 -> 0.178 m. Left at 8 for the unoccluded switch. (Keeping (a)'s 6-7 matches only when (b) finds none:
+    # the same gaps, unoccluded switches 0 -> 1 on seeds 0-4 and on 10-19.)
     projection_radius: float = 12.0
     projection_nn_ratio: float = 0.9
     min_projection_matches: int = 8
