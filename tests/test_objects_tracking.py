@@ -868,3 +868,24 @@ def test_ba_write_back_restarts_the_position_filter_and_keeps_the_rotation_filte
     else:
         np.testing.assert_allclose(newest.T_w_o[:3, :3], T_ba[1][:3, :3], atol=1e-9)
         np.testing.assert_allclose(newest.w_o, w_ba[1])
+
+
+@pytest.mark.parametrize("where", ["in view", "out of view"])
+def test_a_vote_for_a_track_predicted_out_of_view_is_not_taken(where):
+    """A car that left the image by its left border 1 s ago (beyond join_max_gap_s: no box join) is voted for by
+    a look-alike (the same descriptors) now entering there: the look-alike starts a track of its own, as on sim
+    following s17, where the next car leaving by the same border took the first one's track. A car hidden for 1 s
+    where its track predicts it to be in view keeps its track on the same vote."""
+    rng = np.random.default_rng(23)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    speed = -0.6 if where == "out of view" else -0.1  # m per frame, at 15 m ahead
+    T_car = [make_pose(np.eye(3), np.array([-4.0 + speed * i, 0.8, 15.0])) for i in range(4)]
+    objects, trk = ObjectMap(), tracker()
+    e = track_alone(trk, objects, car, T_car)
+    for i in range(4, 14):
+        trk.track(make_frame(i, []), None, objects)
+    assert 13 * DT - 3 * DT > trk.cfg.join_max_gap_s
+    car.inst = 1002
+    trk.track(make_frame(14, [(car, make_pose(np.eye(3), np.array([-6.5, 0.8, 15.0])))]), None, objects)
+    (back,) = [tr for tr in objects.tracks.values() if tr.last.frame_index == 14]
+    assert (back.track_id == e.track_id) == (where == "in view")

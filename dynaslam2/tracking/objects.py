@@ -588,17 +588,19 @@ class ObjectTracker:
     def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                     inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, boxes: np.ndarray,
                     free: np.ndarray) -> int | None:
-        """An unclaimed instance (`points`: its `_instance_points`): joins an unseen track (point votes with
-        >= min_inliers close keypoints, then box IoU with a track measured within join_max_gap_s, or within
-        coast_max_s when the instance has fewer close keypoints: no points then, then the voted track whose
-        pose failed when the instance's box touches its box) or, with >= min_new_points close keypoints (or, on
-        a small instance, >= min_inliers that are >= small_new_fraction of its keypoints), creates an object at
-        the centroid of its points with identity rotation (III-B)."""
+        """An unclaimed instance (`points`: its `_instance_points`): joins an unseen track (point votes with >=
+        min_inliers close keypoints for a track predicted in view (`_in_view`), then box IoU with a track measured
+        within join_max_gap_s, or within coast_max_s when the instance has fewer close keypoints: no points then,
+        then the voted track whose pose failed when the instance's box touches its box) or, with >= min_new_points
+        close keypoints (or, on a small instance, >= min_inliers that are >= small_new_fraction of its keypoints),
+        creates an object at the centroid of its points with identity rotation (III-B)."""
         cfg = self.cfg
         kp, X_w, n_instance = points
         enough = len(kp) >= cfg.min_inliers
         # Track ids from point votes: most matched keypoints belong to one map object.
         voted = self._vote(frame, objects, unseen, kp) if unseen and enough else None
+        if voted is not None and not self._in_view(frame, objects, voted[0], pred[voted[0].track_id]):
+            voted = None
         if voted is not None:
             tid = self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted)
             if tid is not None:
@@ -665,6 +667,15 @@ class ObjectTracker:
             return None
         sel = owner == votes_id[b]
         return objects.tracks[int(votes_id[b])], kp[m[sel, 1]], pts[m[sel, 0]]
+
+    def _in_view(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray) -> bool:
+        """Whether any point of `track` projects into `frame`'s image at its predicted pose: a vote for a track
+        predicted out of view is one for a look-alike (following s17: a car that had left by the left border took
+        the instance of the next car leaving there 0.8 s later)."""
+        T_c_o = frame.T_c_w @ T_w_o_pred
+        X_c = transform(T_c_o, objects.points.X_o[objects.points.of_track(track.track_id)])
+        X_c = X_c[X_c[:, 2] > 1e-3]
+        return bool(len(X_c)) and bool(self.camera.in_image(self.camera.project(X_c)).any())
 
     def _join_by_points(self, frame: Frame, objects: ObjectMap, pred: dict[int, np.ndarray], inst: int,
                         box: np.ndarray, kp: np.ndarray, X_w: np.ndarray, free: np.ndarray, tr: ObjectTrack,
