@@ -87,6 +87,16 @@ def test_damping_holds_points_without_depth_information():
     assert np.all(along < 1e-3 * np.linalg.norm(step[held], axis=1) + 1e-12)
 
 
+def test_a_singular_point_block_raises():
+    """Undamped, a point seen once without depth has a singular block: reduce_static raises LinAlgError (the
+    LM of schur_lm.py then raises its damping), not a system of NaNs."""
+    p = make_object_window(np.random.default_rng(6), CAMERA, n_keyframes=4, n_static=100).problem
+    meas = p.meas.copy()
+    meas[np.isin(p.obs_pt, np.flatnonzero(np.bincount(p.obs_pt, minlength=len(p.X_w)) == 1)), 2] = -1.0
+    with pytest.raises(np.linalg.LinAlgError):
+        static_schur(p.T_c_w, ~p.fixed, p.X_w, p.obs_kf, p.obs_pt, meas, p.inv_sigma2, CAMERA, 1e-3, None, 0.0)
+
+
 def test_factor_square_root():
     """The factor's rows A, b: A^T A = S and -A^T b = s, by Cholesky when S is positive definite (the fixed
     cameras hold the gauge), by the eigen-decomposition when it is not (here a camera without terms)."""

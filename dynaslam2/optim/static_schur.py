@@ -6,8 +6,9 @@ points gives the reduced camera system S = H_cc - H_cp H_pp^-1 H_pc, s = g_c - H
 first, as the SCHUR elimination order), and once the cameras are solved each point moves by
 -H_pp^-1 (g_p + H_pc d_c) (back-substitution): without damping, exactly
 gtsam's linearization and partial elimination of the same GenericStereoFactor3D / projection factors
-(tests/test_static_schur.py), computed in vectorized numpy (closed-form stereo Jacobians, one
-block-sparse product for the reduction) instead of building, linearizing and eliminating ~20k factors.
+(tests/test_static_schur.py), computed in vectorized numpy (closed-form stereo Jacobians and 3x3 point
+blocks, one dense BLAS product for the reduction) instead of building, linearizing and eliminating ~20k
+factors.
 
 `StaticSchur.factor` puts the reduced system into a gtsam graph as one factor on the free camera
 poses (T_w_c, right perturbations), whose error is the quadratic model of the static cost: the BA
@@ -22,7 +23,6 @@ from functools import cached_property
 
 import gtsam
 import numpy as np
-import scipy.sparse as sp
 from scipy.linalg import solve_triangular
 
 from dynaslam2.geometry.camera import StereoCamera
@@ -38,11 +38,11 @@ class StaticSchur:
     S: np.ndarray  # (6C, 6C)
     s: np.ndarray  # (6C,)
     points: np.ndarray  # (P',) indices of the points eliminated
-    H_pp_inv: np.ndarray  # (P', 3, 3) inverse of the damped point blocks
-    g_p: np.ndarray  # (P', 3)
+    L_pp: np.ndarray  # (6, P') Cholesky factors of the damped point blocks (`_cholesky3`)
+    g_p: np.ndarray  # (3, P')
     obs_cam: np.ndarray  # (M',) row in `cams` of each used observation with a free camera
     obs_point: np.ndarray  # (M',) row in `points`
-    W: np.ndarray  # (M', 6, 3) H_cp block of each such observation
+    W: np.ndarray  # (6, 3, M') H_cp block of each such observation
     cost: float  # 1/2 sum of the whitened, Huber-weighted squared residuals at the linearization point
 
     @cached_property
@@ -86,9 +86,10 @@ class StaticSchur:
 
     def point_steps(self, d_cams: np.ndarray) -> np.ndarray:
         """(P', 3) point increments for (C, 6) camera increments: -H_pp^-1 (g_p + sum H_pc d_c)."""
-        Wd = np.einsum("mij,mi->mj", self.W, d_cams[self.obs_cam])
-        rhs = self.g_p + np.column_stack([np.bincount(self.obs_point, Wd[:, i], len(self.points)) for i in range(3)])
-        return -np.einsum("pij,pj->pi", self.H_pp_inv, rhs)
+        d = d_cams[self.obs_cam].T  # (6, M')
+        Wd = [(self.W[:, j] * d).sum(axis=0) for j in range(3)]
+        rhs = self.g_p + np.array([np.bincount(self.obs_point, Wd[j], len(self.points)) for j in range(3)])
+        return -_cholesky3_solve(self.L_pp, rhs).T
 
 
 @dataclass
@@ -98,7 +99,7 @@ class StaticLinearization:
 
     obs_kf: np.ndarray  # (M,) camera of each observation
     obs_pt: np.ndarray  # (M,) point of each observation
-    J: np.ndarray  # (M, 3, 9)
+    J: np.ndarray  # (M, 3, 9), a view of a (9, 3, M) array: `reduce_static` reads each entry's M values at once
     r: np.ndarray  # (M, 3) whitened, weighted residuals (rows of monocular observations: third 0)
     cost: float  # 1/2 sum |r|^2
 
@@ -136,32 +137,35 @@ def linearize_static(T_c_w: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs
     d = -b * y * inv_z
     a2 = np.where(stereo, a, 0.0)
     e = np.where(stereo, -sw * (camera.fx * x - camera.bf) * inv_z**2, 0.0)
-    J = np.zeros((len(z), 3, 9))
-    J[:, 0, 0], J[:, 0, 1], J[:, 0, 2], J[:, 0, 3], J[:, 0, 5] = -c * y, c * x - a * z, a * y, -a, -c
-    J[:, 1, 0], J[:, 1, 1], J[:, 1, 2], J[:, 1, 4], J[:, 1, 5] = b * z - d * y, d * x, -b * x, -b, -d
-    J[:, 2, 0], J[:, 2, 1], J[:, 2, 2], J[:, 2, 3], J[:, 2, 5] = -e * y, e * x - a2 * z, a2 * y, -a2, -e
-    J[:, 0, 6:] = a[:, None] * R[:, 0] + c[:, None] * R[:, 2]
-    J[:, 1, 6:] = b[:, None] * R[:, 1] + d[:, None] * R[:, 2]
-    J[:, 2, 6:] = a2[:, None] * R[:, 0] + e[:, None] * R[:, 2]
+    Jt = np.zeros((9, 3, len(z)))  # [column, row]: each entry over the observations
+    Jt[0, 0], Jt[1, 0], Jt[2, 0], Jt[3, 0], Jt[5, 0] = -c * y, c * x - a * z, a * y, -a, -c
+    Jt[0, 1], Jt[1, 1], Jt[2, 1], Jt[4, 1], Jt[5, 1] = b * z - d * y, d * x, -b * x, -b, -d
+    Jt[0, 2], Jt[1, 2], Jt[2, 2], Jt[3, 2], Jt[5, 2] = -e * y, e * x - a2 * z, a2 * y, -a2, -e
+    R_t = R.transpose(1, 2, 0)  # (3, 3, M)
+    Jt[6:, 0] = a * R_t[0] + c * R_t[2]
+    Jt[6:, 1] = b * R_t[1] + d * R_t[2]
+    Jt[6:, 2] = a2 * R_t[0] + e * R_t[2]
     r = sw[:, None] * r
-    return StaticLinearization(obs_kf, obs_pt, J, r, 0.5 * float(np.einsum("ij,ij->", r, r)))
+    return StaticLinearization(obs_kf, obs_pt, Jt.transpose(2, 1, 0), r, 0.5 * float(np.einsum("ij,ij->", r, r)))
 
 
 def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) -> StaticSchur:
     """Eliminate the points of a linearization, each point's block damped as Levenberg-Marquardt's
     H_pp + damping I (whitened units); damping 0 is the plain Schur complement (every point determined).
-    `free`: (K,) bool, the cameras kept as variables (the others are constants)."""
-    J, r = lin.J, lin.r
+    `free`: (K,) bool, the cameras kept as variables (the others are constants). Raises
+    np.linalg.LinAlgError when a damped point block is not positive definite."""
+    J = lin.J.transpose(2, 1, 0)  # (9, 3, M): entry [column, row] over the observations
+    r = lin.r.T
     points, obs_point = np.unique(lin.obs_pt, return_inverse=True)
     n_p = len(points)
-    # normal-equation blocks [[H_cc, W], [W^T, H_pp]] and gradient (g_c, g_p): the point ones summed entry
-    # by entry (bincount), the camera ones only where the camera is free
-    Jp = J[:, :, 6:]
-    H_pp = np.empty((n_p, 3, 3))
-    for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
-        H_pp[:, i, j] = H_pp[:, j, i] = np.bincount(obs_point, np.einsum("mk,mk->m", Jp[:, :, i], Jp[:, :, j]), n_p)
-    g_p = np.column_stack([np.bincount(obs_point, np.einsum("mk,mk->m", Jp[:, :, i], r), n_p) for i in range(3)])
-    H_pp_inv = np.linalg.inv(H_pp + damping * np.eye(3))
+    # normal-equation blocks [[H_cc, W], [W^T, H_pp]] and gradient (g_c, g_p), entry by entry over the
+    # observations (each a sum over the 3 residual rows), the point ones summed per point (bincount)
+    Jp = J[6:]
+    H_pp = [np.bincount(obs_point, _rows_dot(Jp[i], Jp[j]), n_p) for i, j in _UPPER3]
+    for i in (0, 3, 5):  # the diagonal of (0,0) (0,1) (0,2) (1,1) (1,2) (2,2)
+        H_pp[i] = H_pp[i] + damping
+    L_pp = _cholesky3(np.array(H_pp))
+    g_p = np.array([np.bincount(obs_point, _rows_dot(Jp[i], r), n_p) for i in range(3)])
 
     K = len(free)
     cams = np.flatnonzero(free)
@@ -169,26 +173,72 @@ def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) ->
     cam_row = np.full(K, -1, dtype=np.int64)
     cam_row[cams] = np.arange(C)
     on_free = np.flatnonzero(cam_row[lin.obs_kf] >= 0)
-    on_free = on_free[np.argsort(lin.obs_kf[on_free], kind="stable")]  # grouped by camera (contiguous rows)
+    on_free = on_free[np.argsort(lin.obs_kf[on_free], kind="stable")]  # grouped by camera (contiguous columns)
     oc, op = cam_row[lin.obs_kf[on_free]], obs_point[on_free]
     indptr = np.concatenate([[0], np.cumsum(np.bincount(oc, minlength=C))])
-    Jc = J[on_free, :, :6]
-    W = Jc.transpose(0, 2, 1) @ Jp[on_free]  # (M', 6, 3) H_cp block of each observation
+    Jc, Jp, r = J[:6, :, on_free], Jp[:, :, on_free], r[:, on_free]
+    W = np.einsum("ikm,jkm->ijm", Jc, Jp, optimize=True)  # (6, 3, M'): the H_cp block of each observation
     # each camera's H_cc and g_c - W H_pp^-1 g_p: one product over its stacked rows
-    Jc_rows, r_rows = Jc.reshape(-1, 6), r[on_free].ravel()
-    Wy = np.einsum("mij,mj->mi", W, np.einsum("pij,pj->pi", H_pp_inv, g_p)[op])
+    Wy = np.einsum("ijm,jm->im", W, _cholesky3_solve(L_pp, g_p)[:, op])
     S = np.zeros((C, 6, C, 6))
     s = np.zeros((C, 6))
     for c in range(C):
-        rows = slice(3 * indptr[c], 3 * indptr[c + 1])
-        S[c, :, c, :] = Jc_rows[rows].T @ Jc_rows[rows]
-        s[c] = Jc_rows[rows].T @ r_rows[rows] - Wy[indptr[c]:indptr[c + 1]].sum(axis=0)
-    # reduction sum_p W_p H_pp^-1 W_p^T = U U^T, U = W chol(H_pp^-1): a block-sparse (6C, 3P) matrix whose
-    # 6x3 blocks are the observations grouped by camera (scipy's BSR product: ~3x its CSR one)
-    U = W @ np.linalg.cholesky(H_pp_inv)[op]
-    Us = sp.bsr_matrix((U, op, indptr), shape=(n, 3 * n_p))
-    S = S.reshape(n, n) - (Us @ Us.T).toarray()
-    return StaticSchur(cams, S, s.ravel(), points, H_pp_inv, g_p, oc, op, W, lin.cost)
+        rows = slice(indptr[c], indptr[c + 1])
+        Jc_rows = Jc[:, :, rows].reshape(6, -1)
+        S[c, :, c, :] = Jc_rows @ Jc_rows.T
+        s[c] = Jc_rows @ r[:, rows].ravel() - Wy[:, rows].sum(axis=1)
+    # reduction sum_p W_p H_pp^-1 W_p^T = U U^T with U = W L^-T (H_pp = L L^T): the (6C, 3P) matrix of the
+    # observations' 6x3 blocks, dense (a camera sees a good part of the window's points) for one BLAS
+    # product (numpy's U @ U.T is a syrk)
+    U = np.zeros(n * 3 * n_p)  # [camera row, point column], flat; entries (6, 3, M') as W's
+    at = ((oc * 6 + np.arange(6)[:, None, None]) * n_p + op) * 3 + np.arange(3)[:, None]
+    U[at] = _cholesky3_forward(L_pp[:, op], W)
+    U = U.reshape(n, 3 * n_p)
+    S = S.reshape(n, n) - U @ U.T
+    return StaticSchur(cams, S, s.ravel(), points, L_pp, g_p, oc, op, W, lin.cost)
+
+
+_UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # the entries of a symmetric 3x3 block, in order
+
+
+def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(M,) sum over the 3 residual rows of a * b, for (3, M) entries `a`, `b`."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cholesky3(H: np.ndarray) -> np.ndarray:
+    """Lower Cholesky factors L (L L^T = H) of symmetric 3x3 blocks given by their `_UPPER3` entries (6, P),
+    as (l00, l10, l20, l11, l21, l22) (6, P); np.linalg.LinAlgError when one is not positive definite."""
+    h00, h01, h02, h11, h12, h22 = H
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l00 = np.sqrt(h00)
+        l10, l20 = h01 / l00, h02 / l00
+        l11 = np.sqrt(h11 - l10 * l10)
+        l21 = (h12 - l20 * l10) / l11
+        l22 = np.sqrt(h22 - l20 * l20 - l21 * l21)
+    L = np.array([l00, l10, l20, l11, l21, l22])
+    if not np.all(L[[0, 3, 5]] > 0.0):  # also catches NaN
+        raise np.linalg.LinAlgError("a point block is not positive definite")
+    return L
+
+
+def _cholesky3_forward(L: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """L^-1 v for (6, P) factors `L` (`_cholesky3`) and vectors v (..., 3, P)."""
+    l00, l10, l20, l11, l21, l22 = L
+    z0 = v[..., 0, :] / l00
+    z1 = (v[..., 1, :] - l10 * z0) / l11
+    z2 = (v[..., 2, :] - l20 * z0 - l21 * z1) / l22
+    return np.stack([z0, z1, z2], axis=-2)
+
+
+def _cholesky3_solve(L: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """H^-1 v (H = L L^T) for (6, P) factors `L` and (3, P) vectors `v`."""
+    l00, l10, l20, l11, l21, l22 = L
+    z0, z1, z2 = _cholesky3_forward(L, v)
+    x2 = z2 / l22
+    x1 = (z1 - l21 * x2) / l11
+    x0 = (z0 - l10 * x1 - l20 * x2) / l00
+    return np.array([x0, x1, x2])
 
 
 def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
