@@ -99,14 +99,14 @@ class StaticLinearization:
 
     obs_kf: np.ndarray  # (M,) camera of each observation
     obs_pt: np.ndarray  # (M,) point of each observation
-    J: np.ndarray  # (M, 3, 9), a view of a (9, 3, M) array: `reduce_static` reads each entry's M values at once
+    J_t: np.ndarray  # (9, 3, M) Jacobian entries [column, row], each over the observations (contiguous)
     r: np.ndarray  # (M, 3) whitened, weighted residuals (rows of monocular observations: third 0)
     cost: float  # 1/2 sum |r|^2
 
     def model_cost(self, d_cams: np.ndarray, d_points: np.ndarray) -> float:
         """1/2 sum |J d + r|^2, the linear model's cost for (K, 6) camera and (P, 3) point increments."""
-        d = np.concatenate([d_cams[self.obs_kf], d_points[self.obs_pt]], axis=1)
-        e = np.einsum("mij,mj->mi", self.J, d) + self.r
+        d = np.concatenate([d_cams[self.obs_kf], d_points[self.obs_pt]], axis=1).T
+        e = np.einsum("jim,jm->im", self.J_t, d, optimize=True) + self.r.T
         return 0.5 * float(np.einsum("ij,ij->", e, e))
 
 
@@ -137,16 +137,16 @@ def linearize_static(T_c_w: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs
     d = -b * y * inv_z
     a2 = np.where(stereo, a, 0.0)
     e = np.where(stereo, -sw * (camera.fx * x - camera.bf) * inv_z**2, 0.0)
-    Jt = np.zeros((9, 3, len(z)))  # [column, row]: each entry over the observations
-    Jt[0, 0], Jt[1, 0], Jt[2, 0], Jt[3, 0], Jt[5, 0] = -c * y, c * x - a * z, a * y, -a, -c
-    Jt[0, 1], Jt[1, 1], Jt[2, 1], Jt[4, 1], Jt[5, 1] = b * z - d * y, d * x, -b * x, -b, -d
-    Jt[0, 2], Jt[1, 2], Jt[2, 2], Jt[3, 2], Jt[5, 2] = -e * y, e * x - a2 * z, a2 * y, -a2, -e
+    J_t = np.zeros((9, 3, len(z)))  # [column, row]: each entry over the observations
+    J_t[0, 0], J_t[1, 0], J_t[2, 0], J_t[3, 0], J_t[5, 0] = -c * y, c * x - a * z, a * y, -a, -c
+    J_t[0, 1], J_t[1, 1], J_t[2, 1], J_t[4, 1], J_t[5, 1] = b * z - d * y, d * x, -b * x, -b, -d
+    J_t[0, 2], J_t[1, 2], J_t[2, 2], J_t[3, 2], J_t[5, 2] = -e * y, e * x - a2 * z, a2 * y, -a2, -e
     R_t = R.transpose(1, 2, 0)  # (3, 3, M)
-    Jt[6:, 0] = a * R_t[0] + c * R_t[2]
-    Jt[6:, 1] = b * R_t[1] + d * R_t[2]
-    Jt[6:, 2] = a2 * R_t[0] + e * R_t[2]
+    J_t[6:, 0] = a * R_t[0] + c * R_t[2]
+    J_t[6:, 1] = b * R_t[1] + d * R_t[2]
+    J_t[6:, 2] = a2 * R_t[0] + e * R_t[2]
     r = sw[:, None] * r
-    return StaticLinearization(obs_kf, obs_pt, Jt.transpose(2, 1, 0), r, 0.5 * float(np.einsum("ij,ij->", r, r)))
+    return StaticLinearization(obs_kf, obs_pt, J_t, r, 0.5 * float(np.einsum("ij,ij->", r, r)))
 
 
 def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) -> StaticSchur:
@@ -154,7 +154,7 @@ def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) ->
     H_pp + damping I (whitened units); damping 0 is the plain Schur complement (every point determined).
     `free`: (K,) bool, the cameras kept as variables (the others are constants). Raises
     np.linalg.LinAlgError when a damped point block is not positive definite."""
-    J = lin.J.transpose(2, 1, 0)  # (9, 3, M): entry [column, row] over the observations
+    J = lin.J_t
     r = lin.r.T
     points, obs_point = np.unique(lin.obs_pt, return_inverse=True)
     n_p = len(points)
