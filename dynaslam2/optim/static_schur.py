@@ -7,7 +7,7 @@ first, as the SCHUR elimination order), and once the cameras are solved each poi
 -H_pp^-1 (g_p + H_pc d_c) (back-substitution): without damping, exactly
 gtsam's linearization and partial elimination of the same GenericStereoFactor3D / projection factors
 (tests/test_static_schur.py), computed in vectorized numpy (closed-form stereo Jacobians and 3x3 point
-blocks, one dense BLAS product for the reduction) instead of building, linearizing and eliminating ~20k
+blocks, one block-sparse product for the reduction) instead of building, linearizing and eliminating ~20k
 factors.
 
 `StaticSchur.factor` puts the reduced system into a gtsam graph as one factor on the free camera
@@ -23,6 +23,7 @@ from functools import cached_property
 
 import gtsam
 import numpy as np
+import scipy.sparse as sp
 from scipy.linalg import solve_triangular
 
 from dynaslam2.geometry.camera import StereoCamera
@@ -187,14 +188,11 @@ def reduce_static(lin: StaticLinearization, free: np.ndarray, damping: float) ->
         Jc_rows = Jc[:, :, rows].reshape(6, -1)
         S[c, :, c, :] = Jc_rows @ Jc_rows.T
         s[c] = Jc_rows @ r[:, rows].ravel() - Wy[:, rows].sum(axis=1)
-    # reduction sum_p W_p H_pp^-1 W_p^T = U U^T with U = W L^-T (H_pp = L L^T): the (6C, 3P) matrix of the
-    # observations' 6x3 blocks, dense (a camera sees a good part of the window's points) for one BLAS
-    # product (numpy's U @ U.T is a syrk)
-    U = np.zeros(n * 3 * n_p)  # [camera row, point column], flat; entries (6, 3, M') as W's
-    at = ((oc * 6 + np.arange(6)[:, None, None]) * n_p + op) * 3 + np.arange(3)[:, None]
-    U[at] = _cholesky3_forward(L_pp[:, op], W)
-    U = U.reshape(n, 3 * n_p)
-    S = S.reshape(n, n) - U @ U.T
+    # reduction sum_p W_p H_pp^-1 W_p^T = U U^T with U = W L^-T (H_pp = L L^T): a block-sparse (6C, 3P) matrix
+    # whose 6x3 blocks are the observations grouped by camera (scipy's BSR product: ~3x its CSR one)
+    U = np.ascontiguousarray(_cholesky3_forward(L_pp[:, op], W).transpose(2, 0, 1))
+    Us = sp.bsr_matrix((U, op, indptr), shape=(n, 3 * n_p))
+    S = S.reshape(n, n) - (Us @ Us.T).toarray()
     return StaticSchur(cams, S, s.ravel(), points, L_pp, g_p, oc, op, W, lin.cost)
 
 
