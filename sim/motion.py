@@ -171,6 +171,11 @@ class Trajectory:
         """Newell follower on the same path: s_f(t) = s(t - delay) - gap."""
         return Trajectory(self.path, self.speed, self.s0 - gap, self.tau + delay, self.yaw_offset)
 
+    def delayed(self, headway: float) -> "Trajectory":
+        """The same motion `headway` seconds later, s_f(t) = s(t - headway): a follower that slows where the
+        leader slowed (a Newell follower would slow `gap` metres too late)."""
+        return Trajectory(self.path, self.speed, self.s0, self.tau + headway, self.yaw_offset)
+
     def is_static(self) -> bool:
         return bool(np.all(self.speed.v_knots == 0.0))
 
@@ -201,6 +206,21 @@ def stop_and_go_profile(rng: np.random.Generator, v_nominal: float, t_end: float
             t += max(rng.uniform(2.5, 5.0), abs(v - v_prev) / 2.5)
             knots.append((t, v))
     return SpeedProfile.of(knots)
+
+
+def turning_profile(v_cruise: float, approach: float, turn_length: float, v_turn: float) -> SpeedProfile:
+    """Cruise at v_cruise, brake to v_turn so as to reach arc length `approach` (where the turn starts) at
+    v_turn, hold it over the `turn_length` metres of the turn, then accelerate back to v_cruise (ramps as
+    in stop_and_go_profile: braking at ~3, accelerating at ~2.5 m/s^2 on average). Constant v_cruise when
+    that is not faster than v_turn."""
+    if v_cruise <= v_turn:
+        return SpeedProfile.constant(v_cruise)
+    brake = max(1.5, (v_cruise - v_turn) / 3.0)
+    accelerate = max(1.5, (v_cruise - v_turn) / 2.5)
+    t_turn = (approach - brake * 0.5 * (v_cruise + v_turn)) / v_cruise + brake  # distance(t_turn) = approach
+    t_out = t_turn + turn_length / v_turn
+    return SpeedProfile.of([(min(t_turn - brake, 0.0) - 5.0, v_cruise), (t_turn - brake, v_cruise), (t_turn, v_turn),
+                            (t_out, v_turn), (t_out + accelerate, v_cruise)])
 
 
 @dataclass
@@ -610,22 +630,29 @@ def _plan_followers(cfg, layout: StreetLayout, rng: np.random.Generator, ego: Tr
             last[:] = [added]
 
 
+_TURN_LENGTH = 12.0  # m of path over which a vehicle turns right at the intersection
+
+
 def _turn_path(x_lane: float, heading0: float, heading1: float, y_target: float, approach: float) -> Path:
     """Straight approach along the crossing street (heading0) then a smooth right turn onto the main
     street at lane y_target (heading1), then straight."""
-    turn_len = 12.0
-    turn = Path.build(0.0, 0.0, heading0, [("turn", turn_len, heading1 - heading0)])
+    turn = Path.build(0.0, 0.0, heading0, [("turn", _TURN_LENGTH, heading1 - heading0)])
     dy_turn = turn.y[-1]
     y_turn_start = y_target - dy_turn
     y_start = y_turn_start - approach * np.sin(heading0)
-    return Path.build(x_lane, y_start, heading0, [("straight", approach), ("turn", turn_len, heading1 - heading0),
-                                                  ("straight", 1.0)])
+    return Path.build(x_lane, y_start, heading0, [("straight", approach),
+                                                  ("turn", _TURN_LENGTH, heading1 - heading0), ("straight", 1.0)])
 
 
 def _plan_cross_traffic(cfg, layout: StreetLayout, rng: np.random.Generator, n: int, try_add) -> None:
-    """`crossing`: platoons on the crossing street in both directions, some turning right into the main street."""
+    """`crossing`: platoons on the crossing street in both directions, some turning right into the main street.
+
+    A turning vehicle brakes to the speed at which the turn's peak curvature (pi / _TURN_LENGTH) gives a lateral
+    acceleration of cfg.turn_lateral_accel, and its followers repeat its motion with a time headway (their delay
+    plus their gap at that speed); outside the turn it keeps its cruise speed (no stops)."""
     x_int, lw, k, duration = layout.x_int, layout.lane_width, cfg.object_speed, cfg.duration
     streams = [(x_int + 0.5 * lw, np.pi / 2), (x_int - 0.5 * lw, -np.pi / 2)]
+    v_turn = float(np.sqrt(cfg.turn_lateral_accel * _TURN_LENGTH / np.pi))
     last: dict[int, PlannedActor] = {}
     for _ in range(n):
         stream = int(rng.integers(2))
@@ -635,15 +662,19 @@ def _plan_cross_traffic(cfg, layout: StreetLayout, rng: np.random.Generator, n: 
             cls = _moving_class(rng)
             dims = _dims(rng, cls)
             if stream in last and rng.random() < 0.3 + 0.6 * cfg.occlusion:
-                prev = last[stream]
-                gap = 0.5 * (prev.dims[0] + dims[0]) + (1.0 - 0.7 * cfg.occlusion) * rng.uniform(3.0, 8.0)
-                return cls, dims, prev.trajectory.follower(rng.uniform(0.8, 1.6), gap)
-            prof = stop_and_go_profile(rng, rng.uniform(6.0, 11.0) * k, duration, stop_prob=0.1)
+                prev = last[stream].trajectory
+                gap = 0.5 * (last[stream].dims[0] + dims[0]) + (1.0 - 0.7 * cfg.occlusion) * rng.uniform(3.0, 8.0)
+                delay = rng.uniform(0.8, 1.6)
+                turns = prev.path.heading[-1] != prev.path.heading[0]
+                return cls, dims, prev.delayed(delay + gap / v_turn) if turns else prev.follower(delay, gap)
+            v_cruise = rng.uniform(6.0, 11.0) * k
+            prof = stop_and_go_profile(rng, v_cruise, duration, stop_prob=0.1)
             t_cross = rng.uniform(-0.1, 0.9) * duration  # when it reaches the main street
             approach = 40.0
             if rng.random() < 0.3:  # right turn into the main street
                 y_target = layout.lane_y(layout.lanes_per_direction - 1, heading < 0)
                 path = _turn_path(x_lane, heading, heading - np.pi / 2, y_target, approach)
+                prof = turning_profile(v_cruise, approach, _TURN_LENGTH, v_turn)
             else:
                 path = Path.build(x_lane, -np.sign(np.sin(heading)) * (approach + layout.kerb), heading,
                                   [("straight", 1.0)])

@@ -57,6 +57,7 @@ class ScenarioConfig:
     n_pedestrians: int = 6
     parked_fraction: float = 0.35
     object_speed: float = 1.0  # scale on the nominal speed of every moving object
+    turn_lateral_accel: float = 3.0  # m/s^2: a vehicle turning at the intersection slows to keep under it
     occlusion: float = 0.3
     texture: Literal["rich", "poor"] = "rich"
     depth: bool = True
@@ -88,6 +89,7 @@ class ScenarioConfig:
             ("n_pedestrians", 0 <= self.n_pedestrians <= 200, "an integer in [0, 200]"),
             ("parked_fraction", 0 <= self.parked_fraction <= 1, "a fraction in [0, 1]"),
             ("object_speed", 0 <= self.object_speed <= 5, "a scale factor in [0, 5]"),
+            ("turn_lateral_accel", 0.5 <= self.turn_lateral_accel <= 15, "m/s^2 in [0.5, 15]"),
             ("occlusion", 0 <= self.occlusion <= 1, "a fraction in [0, 1]"),
             ("lane_width", 2.5 <= self.lane_width <= 6, "metres in [2.5, 6]"),
             ("lanes_per_direction", 1 <= self.lanes_per_direction <= 3, "an integer in [1, 3]"),

@@ -22,7 +22,8 @@ from sim.scenarios import ScenarioConfig
 
 # Bumped whenever the rendered world changes for the same scenario config and seed, so that cached sequences
 # (benchmarks) are not silently stale. 2: vehicle paint and glass undistorted (were stretched per box face).
-WORLD_VERSION = 2
+# 3: `crossing`'s turning vehicles slow for the turn (turned at up to 2.5 rad/s, 10-24 m/s^2 lateral).
+WORLD_VERSION = 3
 
 # OpenCV camera axes (x right, y down, z forward) expressed in the ego body frame (x fwd, y left, z up)
 R_BODY_CV = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])

@@ -292,6 +292,39 @@ def test_motion_primitives_are_exact():
     np.testing.assert_allclose(np.hypot(vx, vy), prof.speed(np.array([3.0, 5.5])), rtol=1e-4, atol=1e-9)
 
 
+def test_turning_profile_holds_the_turn_speed_over_the_turn():
+    from sim.motion import turning_profile
+
+    prof = turning_profile(v_cruise=10.0, approach=40.0, turn_length=12.0, v_turn=3.4)
+    t = np.linspace(-10.0, 30.0, 400001)
+    s = prof.distance(t)
+    in_turn = (s >= 40.0) & (s <= 52.0)
+    np.testing.assert_allclose(prof.speed(t[in_turn]), 3.4, atol=1e-3)
+    assert prof.speed(t[0]) == 10.0 and prof.speed(t[-1]) == 10.0
+    assert np.all(np.abs(np.diff(prof.speed(t))) * 1e4 < 3.0 * 1.5 + 1e-6)  # ramps as stop_and_go_profile's
+    assert turning_profile(3.0, 40.0, 12.0, 3.4).speed(5.0) == 3.0  # slower than the turn speed: unchanged
+
+
+@pytest.mark.parametrize("accel", [3.0, 1.5])
+def test_turning_vehicles_keep_their_lateral_acceleration(accel):
+    """crossing's right turns: |v| * yaw rate <= turn_lateral_accel (before world 3 they turned at up to 2.5 rad/s,
+    24 m/s^2), reached at the turn's peak curvature; a follower of a turning vehicle turns as slowly."""
+    from sim.motion import plan_scenario
+
+    peaks = []
+    for seed in range(4):
+        cfg = load_scenario("crossing", [f"seed={seed}", "frames=150", f"turn_lateral_accel={accel}"])
+        plan = plan_scenario(cfg, np.random.SeedSequence(seed).spawn(3)[0])
+        t = np.arange(0.0, cfg.duration, 0.01)
+        for actor in plan.actors:
+            path = actor.trajectory.path
+            if abs(abs(path.heading[-1] - path.heading[0]) - np.pi / 2) < 1e-6:
+                vx, vy, yaw_rate = actor.trajectory.velocity(t)
+                peaks.append(np.max(np.hypot(vx, vy) * np.abs(yaw_rate)))
+    assert len(peaks) >= 3
+    assert max(peaks) <= accel * 1.01 and np.median(peaks) >= accel * 0.95
+
+
 def test_street_bend_turns_the_ego():
     w = build_world(load_scenario("following", ["frames=150", "image_size=64x48", "texture_px=32",
                                                 "curve_deg=15", "curve_start=30"]))
