@@ -735,6 +735,24 @@ def test_validation_gate_rejects_an_association_outlier(gate):
     assert (err < 0.1) if np.isfinite(gate) else (err > 0.5)
 
 
+@pytest.mark.parametrize("max_turn_rate", [4.0, float("inf")])
+def test_a_pose_turned_faster_than_max_turn_rate_is_rejected(max_turn_rate):
+    """Frame 5 shows the car's keypoints turned by 40 deg about its vertical axis since frame 4 (7 rad/s: a
+    flipped or mis-associated pose, as pose-only optimizations of thin far objects give): with the gate the
+    pose-only result is rejected and the track keeps its rotation (its box join registers the position only);
+    without it the estimate turns with it."""
+    rng = np.random.default_rng(5)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-3.0 + 0.5 * i, 0.8, 15.0])) for i in range(6)]
+    objects, trk = ObjectMap(), tracker(f"objects.max_turn_rate={max_turn_rate}")
+    turn = make_pose(so3_exp(np.array([0.0, np.radians(40.0), 0.0])), np.zeros(3))
+    for i in range(6):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i] @ turn if i == 5 else T_car[i])]), None, objects).estimates
+    track = objects.tracks[e.track_id]
+    turned = np.degrees(np.linalg.norm(so3_log(track.observations[-2].T_w_o[:3, :3].T @ e.T_w_o[:3, :3])))
+    assert (turned < 1.0) if np.isfinite(max_turn_rate) else (turned > 20.0)
+
+
 @pytest.mark.parametrize("shape_only", [True, False])
 def test_point_fusion_keeps_the_object_frame_on_the_body(shape_only):
     """Stereo observations placed with a pose that is off by 0.4 m (what a pose error does) and one

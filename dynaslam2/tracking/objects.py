@@ -272,8 +272,8 @@ class ObjectTracker:
                       kp: np.ndarray, pts: np.ndarray, robust_init: bool) -> tuple[np.ndarray, np.ndarray] | None:
         """Object pose-only optimization (III-B) of `track` from matches keypoint `kp` <-> point `pts`;
         with `robust_init` the start comes from a 3D-3D RANSAC on the stereo depths. Returns (T_w_o,
-        inlier mask) or None when too few inliers, the implied speed is not physical or (with the filter)
-        the position fails the validation gate gate_nis."""
+        inlier mask) or None when too few inliers, the implied speed (or turn rate, max_turn_rate) is not physical
+        or (with the filter) the position fails the validation gate gate_nis."""
         cfg = self.cfg
         X_o = objects.points.X_o[pts]
         if robust_init:
@@ -293,6 +293,8 @@ class ObjectTracker:
             return None
         dt = frame.timestamp - track.last.timestamp
         if dt > 0 and np.linalg.norm(T_w_o[:3, 3] - track.last.T_w_o[:3, 3]) > cfg.max_speed_mps * dt:
+            return None
+        if dt > 0 and np.linalg.norm(so3_log(track.last.T_w_o[:3, :3].T @ T_w_o[:3, :3])) > cfg.max_turn_rate * dt:
             return None
         if self._gated(track, dt, T_w_o[:3, 3],
                        lambda: self._pose_information(frame, objects, T_w_o, kp[inliers], pts[inliers])[0]):
