@@ -185,6 +185,11 @@ def static_trajectory(x: float, y: float, yaw: float) -> Trajectory:
     return Trajectory(Path.build(x, y, yaw, [("straight", 1.0)]), SpeedProfile.constant(0.0))
 
 
+# Speed ramps of the profiles below: mean braking / accelerating rates (m/s^2; a smoothstep peaks at 1.5x the
+# mean) and the shortest ramp (s).
+_BRAKE_RATE, _ACCEL_RATE, _MIN_RAMP_S = 3.0, 2.5, 1.5
+
+
 def stop_and_go_profile(rng: np.random.Generator, v_nominal: float, t_end: float, stop_prob: float = 0.3,
                         variation: float = 0.2) -> SpeedProfile:
     """Speeds drawn around v_nominal at knots every 2.5-5 s, with occasional stops of 1.5-3 s
@@ -194,16 +199,16 @@ def stop_and_go_profile(rng: np.random.Generator, v_nominal: float, t_end: float
     while t < t_end + 5.0:
         v_prev = knots[-1][1]
         if rng.random() < stop_prob and v_nominal > 0:
-            ramp = max(1.5, v_prev / 3.0)
+            ramp = max(_MIN_RAMP_S, v_prev / _BRAKE_RATE)
             knots.append((t + ramp, 0.0))
             t += ramp + rng.uniform(1.5, 3.0)
             knots.append((t, 0.0))
             v = v_nominal * rng.uniform(1 - variation, 1 + variation)
-            t += max(1.5, v / 2.5)
+            t += max(_MIN_RAMP_S, v / _ACCEL_RATE)
             knots.append((t, v))
         else:
             v = v_nominal * rng.uniform(1 - variation, 1 + variation)
-            t += max(rng.uniform(2.5, 5.0), abs(v - v_prev) / 2.5)
+            t += max(rng.uniform(2.5, 5.0), abs(v - v_prev) / _ACCEL_RATE)
             knots.append((t, v))
     return SpeedProfile.of(knots)
 
@@ -211,12 +216,12 @@ def stop_and_go_profile(rng: np.random.Generator, v_nominal: float, t_end: float
 def turning_profile(v_cruise: float, approach: float, turn_length: float, v_turn: float) -> SpeedProfile:
     """Cruise at v_cruise, brake to v_turn so as to reach arc length `approach` (where the turn starts) at
     v_turn, hold it over the `turn_length` metres of the turn, then accelerate back to v_cruise (ramps as
-    in stop_and_go_profile: braking at ~3, accelerating at ~2.5 m/s^2 on average). Constant v_cruise when
+    in stop_and_go_profile: _BRAKE_RATE, _ACCEL_RATE). Constant v_cruise when
     that is not faster than v_turn."""
     if v_cruise <= v_turn:
         return SpeedProfile.constant(v_cruise)
-    brake = max(1.5, (v_cruise - v_turn) / 3.0)
-    accelerate = max(1.5, (v_cruise - v_turn) / 2.5)
+    brake = max(_MIN_RAMP_S, (v_cruise - v_turn) / _BRAKE_RATE)
+    accelerate = max(_MIN_RAMP_S, (v_cruise - v_turn) / _ACCEL_RATE)
     t_turn = (approach - brake * 0.5 * (v_cruise + v_turn)) / v_cruise + brake  # distance(t_turn) = approach
     t_out = t_turn + turn_length / v_turn
     return SpeedProfile.of([(min(t_turn - brake, 0.0) - 5.0, v_cruise), (t_turn - brake, v_cruise), (t_turn, v_turn),
