@@ -367,6 +367,28 @@ def test_box_association_after_a_short_occlusion_keeps_the_id():
     assert e.track_id != first
 
 
+def test_box_joins_keep_a_track_whose_instance_is_seen_beyond_join_max_gap_s():
+    """A car measured for 5 frames changes its appearance in every later frame (no point matches: no pose, vote
+    or registration) while its instance stays in view: each frame's box join keeps the track at its constant-
+    velocity prediction (measured=False), 1.2 s beyond its last measured pose. The box join's window counts from
+    the track's newest observation, as SORT's max_age from its newest matched detection; from the newest measured
+    pose, a new track took the car 0.8 s after it."""
+    rng = np.random.default_rng(7)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    n = 17
+    T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 15.0])) for i in range(n)]
+    objects, trk = ObjectMap(), tracker()
+    assert (n - 5) * DT > trk.cfg.join_max_gap_s + 0.3
+    ids = []
+    for i in range(n):
+        if i >= 5:
+            car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+        ids.append(e.track_id)
+    assert ids == [ids[0]] * n
+    assert [o.measured for o in objects.tracks[ids[0]].observations] == [i < 5 for i in range(n)]
+
+
 def test_track_goes_on_at_its_prediction_while_its_instance_has_too_few_points():
     """For two frames the car's instance carries only 4 keypoints (too few for a pose, a join or an
     object): the instance's box associates it with the track, which goes on at its constant-velocity

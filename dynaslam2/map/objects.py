@@ -110,10 +110,6 @@ class ObjectTrack:
     def last(self) -> ObjectObservation:
         return self.observations[-1]
 
-    def last_measured_timestamp(self) -> float:
-        """Time of the newest observation whose pose was measured (not predicted); -inf if none."""
-        return next((o.timestamp for o in reversed(self.observations) if o.measured), -np.inf)
-
     def at_frame(self, frame_index: int) -> ObjectObservation | None:
         """The observation at `frame_index` (searched from the newest), or None."""
         for obs in reversed(self.observations):

@@ -591,7 +591,7 @@ class ObjectTracker:
                     inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, boxes: np.ndarray,
                     free: np.ndarray) -> int | None:
         """An unclaimed instance (`points`: its `_instance_points`): joins an unseen track (point votes with >=
-        min_inliers close keypoints for a track predicted in view (`_in_view`), then box IoU with a track measured
+        min_inliers close keypoints for a track predicted in view (`_in_view`), then box IoU with a track observed
         within join_max_gap_s, or within coast_max_s when the instance has fewer close keypoints: no points then,
         then the voted track whose pose failed when the instance's box touches its box) or, with >= min_new_points
         close keypoints (or, on a small instance, >= min_inliers that are >= small_new_fraction of its keypoints),
@@ -777,16 +777,17 @@ class ObjectTracker:
 
     def _join_by_box(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                      box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
-        """The unseen track measured within `max_gap_s` and with a predicted box (`predicted_box`: not
-        passed behind the camera) whose last box, as it was (`_last_box`) or moved by its predicted image motion
-        (wrong when the velocity is, or for a near object whose origin projects off its visible part), overlaps
-        `box` most (`_join_overlap`; a moved box >= join_iou first, so that the last box of an object that has left
-        where this one is now cannot take it), if that is >= join_iou and no box of the frame's instances that can
-        still join a track (`boxes`) overlaps that track more (instance-to-instance association, III-B)."""
+        """The unseen track observed within `max_gap_s` (measured or box-joined: SORT's max_age counts from the
+        newest matched detection) and with a predicted box (`predicted_box`: not passed behind the camera) whose
+        last box, as it was (`_last_box`) or moved by its predicted image motion (wrong when the velocity is, or for
+        a near object whose origin projects off its visible part), overlaps `box` most (`_join_overlap`; a moved box
+        >= join_iou first, so that the last box of an object that has left where this one is now cannot take it), if
+        that is >= join_iou and no box of the frame's instances that can still join a track (`boxes`) overlaps that
+        track more (instance-to-instance association, III-B)."""
         cfg = self.cfg
         if not np.all(np.isfinite(box)):
             return None
-        recent = [tr for tr in unseen if frame.timestamp - tr.last_measured_timestamp() <= max_gap_s]
+        recent = [tr for tr in unseen if frame.timestamp - tr.last.timestamp <= max_gap_s]
         moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects) for tr in recent]
         recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
         if not recent:
