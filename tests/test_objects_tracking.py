@@ -292,7 +292,9 @@ def test_box_association_ignores_an_instance_that_cannot_take_the_track():
     neither join a track nor start one) with its box where the first one's track predicts it: the first
     pedestrian, its appearance changed (no descriptor matches) and a little off its prediction, keeps its
     track id through the box join. (The mutual-best test counted the hidden one's box, which overlaps the
-    track more, and the first pedestrian started a new track every frame: crossing s2's pedestrians 24/25.)"""
+    track more, and the first pedestrian started a new track every frame: crossing s2's pedestrians 24/25. With
+    objects.coast_max_s the hidden one, taken first, coasted on the track: instances with enough keypoints now join
+    first, among themselves.)"""
     rng = np.random.default_rng(8)
     ped = Body(rng, 2005, 60, (0.6, 1.7, 0.4))
     objects, trk = ObjectMap(), tracker()
@@ -391,19 +393,22 @@ def test_box_joins_keep_a_track_whose_instance_is_seen_beyond_join_max_gap_s():
 
 def test_track_goes_on_at_its_prediction_while_its_instance_has_too_few_points():
     """For two frames the car's instance carries only 4 keypoints (too few for a pose, a join or an
-    object): the instance's box associates it with the track, which goes on at its constant-velocity
-    prediction (measured=False) and is measured again when the points come back; one id throughout."""
+    object): the instance's box associates it with the track (objects.coast_max_s), which goes on at its
+    constant-velocity prediction (measured=False), unreported, and is measured again when the points come back;
+    one id throughout."""
     rng = np.random.default_rng(6)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     corners = Body(rng, 1001, 4, (4.0, 1.5, 1.5))
     corners.X_b = np.array([[-2.0, -0.75, -0.75], [2.0, 0.75, -0.75], [-2.0, 0.75, 0.75], [2.0, -0.75, 0.75]])
     T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 15.0])) for i in range(10)]
-    objects, trk = ObjectMap(), tracker("objects.filter=false", "objects.coast_max_s=0.5")
+    objects, trk = ObjectMap(), tracker("objects.filter=false")
     ids = []
     for i in range(10):
         body = corners if i in (5, 6) else car
         ids.append([e.track_id for e in trk.track(make_frame(i, [(body, T_car[i])]), None, objects).estimates])
-    assert all(x == ids[0] for x in ids) and len(ids[0]) == 1
+    assert ids[5] == ids[6] == [] and len(ids[0]) == 1
+    assert all(x == ids[0] for k, x in enumerate(ids) if k not in (5, 6))
+    assert len(objects.tracks) == 1
     tr = objects.tracks[ids[0][0]]
     assert [o.measured for o in tr.observations] == [i not in (5, 6) for i in range(10)]
     T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o

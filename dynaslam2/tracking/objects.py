@@ -13,8 +13,9 @@ supports with the most inliers (an object matched onto a neighbour's instance th
 Unclaimed instances with enough close keypoints with depth become objects, unless their keypoints
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
-their box overlaps the box of an object of their class seen in the previous frame
-(instance-to-instance IoU association).
+their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
+association). Then instances with too few close keypoints keep, by their box alone, a track seen within
+`objects.coast_max_s` (coasting: its id kept, its predicted pose not reported).
 """
 
 from __future__ import annotations
@@ -352,22 +353,25 @@ class ObjectTracker:
                 if p is not None and p.instance_id == best.instance_id:
                     proposals[other] = self._propose(frame, objects, objects.tracks[other], pred[other],
                                                      *candidates[other], free, claimed)
-        # Unclaimed instances: re-appearing objects or new ones. The box join's mutual-best test counts the
-        # instances that can still join a track: unclaimed, with enough close keypoints unless tracks coast.
+        # Unclaimed instances: re-appearing objects or new ones, first those with enough close keypoints, then
+        # (coast_max_s) the others. The box join's mutual-best test counts the instances of the same pass that can
+        # still join a track, so that a mostly hidden neighbour cannot outbid an object seen whole.
         # (Each instance's points once: an instance only takes its own keypoints out of `free`.)
         open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
         points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
-        can_join = np.zeros(len(inst_ids), dtype=bool)
-        can_join[open_k] = [cfg.coast_max_s > 0 or len(points[k][0]) >= cfg.min_inliers for k in open_k]
-        for k in open_k:
-            inst = int(inst_ids[k])
-            cls = CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
-            tid = self._new_object(frame, objects, [tr for tr in active if tr.track_id not in seen and tr.cls == cls],
-                                   pred, inst, points[k], boxes[k], boxes[can_join], free)
-            if tid is not None:
-                seen.append(tid)
-                claimed.add(inst)
-                can_join[k] = False
+        enough = {k: len(points[k][0]) >= cfg.min_inliers for k in open_k}
+        for coasting in ([False, True] if cfg.coast_max_s > 0 else [False]):
+            can_join = np.zeros(len(inst_ids), dtype=bool)
+            can_join[[k for k in open_k if enough[k] != coasting and inst_ids[k] not in claimed]] = True
+            for k in np.flatnonzero(can_join).tolist():
+                inst = int(inst_ids[k])
+                cls = CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
+                unseen = [tr for tr in active if tr.track_id not in seen and tr.cls == cls]
+                tid = self._new_object(frame, objects, unseen, pred, inst, points[k], boxes[k], boxes[can_join], free)
+                if tid is not None:
+                    seen.append(tid)
+                    claimed.add(inst)
+                    can_join[k] = False
         self._cull(objects, seen)
         return self._result(frame, objects, seen, dyn)
 
@@ -831,12 +835,13 @@ class ObjectTracker:
     @staticmethod
     def estimates(objects: ObjectMap, frame_index: int, min_observations: int = 1) -> list[ObjectEstimate]:
         """Output of the objects observed at `frame_index` (world-frame velocities), by track id: those whose
-        track had at least `min_observations` observations by then (a confirmed track)."""
+        track had at least `min_observations` observations by then (a confirmed track), and not coasted there (an
+        observation of its instance's box alone, without points: its pose is the prediction, `coast_max_s`)."""
         out = []
         for tid in sorted(objects.tracks):
             tr = objects.tracks[tid]
             obs = tr.at_frame(frame_index)
-            if (obs is None or len(tr.observations) < min_observations
+            if (obs is None or (not obs.measured and obs.n_points == 0) or len(tr.observations) < min_observations
                     or tr.observations[min_observations - 1].frame_index > frame_index):
                 continue
             v_w, w_w = velocity_to_world(obs.T_w_o, obs.v_o, obs.w_o)
