@@ -509,8 +509,8 @@ class ObjectsConfig:
     # A pedestrian's track often goes unmeasured for some frames (half its listed frames on crossing s0-s3 show <= 2
     # keypoints with stereo depth; 16 % of its pose-only optimizations fail on crossing s0/s2) and coasts on box
     # joins; a track neither measured nor box-joined for join_max_gap_s is box-joined no more (its instance starts a
-    # new track). Box joins count as observations, as SORT's max_age counts from the newest matched detection; from
-    # the newest measured pose instead (before), on bench_dynamic's scenarios (world 3, 150 fr, 640x480), -> now:
+    # new track). Box joins count as observations, as SORT's max_age counts from the newest matched detection. Counted
+    # from the newest measured pose (before 141475a) -> now, bench_dynamic's scenarios (world 3, 150 fr, 640x480):
     # seeds 0-4 id switches 17 -> 17, object ATE 0.224 -> 0.225 m; seeds 5-9 10 -> 8 (unoccluded 2 -> 1: a 10 px
     # pedestrian box-joined 0.9 s after its last pose, crossing s9), 0.176 -> 0.177 m; following seeds 10-19 2 -> 1,
     # 0.178 -> 0.189 m (a rejoined car's coasted frames: following s10 gt10 0.31 -> 1.08 m); traffic, crossing,

@@ -360,9 +360,9 @@ class ObjectTracker:
         open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
         points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
         enough = {k: len(points[k][0]) >= cfg.min_inliers for k in open_k}
-        for coasting in ([False, True] if cfg.coast_max_s > 0 else [False]):
+        for with_enough in ([True, False] if cfg.coast_max_s > 0 else [True]):
             can_join = np.zeros(len(inst_ids), dtype=bool)
-            can_join[[k for k in open_k if enough[k] != coasting and inst_ids[k] not in claimed]] = True
+            can_join[[k for k in open_k if enough[k] == with_enough and inst_ids[k] not in claimed]] = True
             for k in np.flatnonzero(can_join).tolist():
                 inst = int(inst_ids[k])
                 cls = CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
