@@ -295,7 +295,8 @@ class ObjectTracker:
         dt = frame.timestamp - track.last.timestamp
         if dt > 0 and np.linalg.norm(T_w_o[:3, 3] - track.last.T_w_o[:3, 3]) > cfg.max_speed_mps * dt:
             return None
-        if dt > 0 and np.linalg.norm(so3_log(track.last.T_w_o[:3, :3].T @ T_w_o[:3, :3])) > cfg.max_turn_rate * dt:
+        if (dt > 0 and np.isfinite(cfg.max_turn_rate)
+                and np.linalg.norm(so3_log(track.last.T_w_o[:3, :3].T @ T_w_o[:3, :3])) > cfg.max_turn_rate * dt):
             return None
         if self._gated(track, dt, T_w_o[:3, 3],
                        lambda: self._pose_information(frame, objects, T_w_o, kp[inliers], pts[inliers])[0]):
