@@ -934,3 +934,32 @@ def test_a_vote_for_a_track_predicted_out_of_view_is_not_taken(where):
     trk.track(make_frame(14, [(car, make_pose(np.eye(3), np.array([-6.5, 0.8, 15.0])))]), None, objects)
     (back,) = [tr for tr in objects.tracks.values() if tr.last.frame_index == 14]
     assert (back.track_id == e.track_id) == (where == "in view")
+
+
+def test_a_tentative_track_that_misses_a_frame_is_deleted():
+    """A car hidden beyond join_max_gap_s comes back with a new appearance: no vote, no box join, so a new track
+    takes it. A frame later its old appearance is back and its old track claims it; the new track, tentative (one
+    observation < min_output_observations) and unmatched, is deleted with its points, as DeepSORT deletes a
+    tentative track that misses a frame. It is never reported, and a later frame's box join cannot hand the car
+    back to it (crossing s10: a young track took a pedestrian back from its re-acquired old track, an id switch
+    on an unoccluded pedestrian)."""
+    rng = np.random.default_rng(21)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.3 * i, 0.8, 15.0])) for i in range(20)]
+    objects, trk = ObjectMap(), tracker()
+    assert 10 * DT > trk.cfg.join_max_gap_s and trk.cfg.min_output_observations == 2
+    for i in range(5):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    old, desc = e.track_id, car.desc.copy()
+    car.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
+    (e,) = trk.track(make_frame(15, [(car, T_car[15])]), None, objects).estimates
+    young, young_points = e.track_id, objects.points.of_track(e.track_id)
+    assert young != old and trk.estimates(objects, 15, trk.cfg.min_output_observations) == []
+    assert len(young_points)
+    car.desc = desc
+    (e,) = trk.track(make_frame(16, [(car, T_car[16])]), None, objects).estimates
+    assert e.track_id == old and young not in objects.tracks
+    assert not objects.points.alive[young_points].any()
+    car.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
+    (e,) = trk.track(make_frame(17, [(car, T_car[17])]), None, objects).estimates
+    assert e.track_id == old

@@ -134,6 +134,11 @@ class ObjectMap:
         self.next_track_id += 1
         return track
 
+    def remove_track(self, track_id: int) -> None:
+        """Forget track `track_id` and its points."""
+        del self.tracks[track_id]
+        self.points.alive[self.points.of_track(track_id)] = False
+
     def add_points(self, track_id: int, X_o: np.ndarray, desc: np.ndarray,
                    weight: np.ndarray | float = 0.0) -> np.ndarray:
         return self.points.add(track_id, X_o, desc, weight)

@@ -15,7 +15,8 @@ mostly match the points of one map object of their class not seen in this frame 
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
 association). Then instances with too few close keypoints keep, by their box alone, a track seen within
-`objects.coast_max_s` (coasting: its id kept, its predicted pose not reported).
+`objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). A tentative track (fewer
+than `objects.min_output_observations` observations) that finds nothing in a frame is deleted.
 """
 
 from __future__ import annotations
@@ -374,6 +375,9 @@ class ObjectTracker:
                     claimed.add(inst)
                     can_join[k] = False
         self._cull(objects, seen)
+        for tr in active:  # tentative and unmatched: deleted (DeepSORT)
+            if tr.track_id not in seen and len(tr.observations) < cfg.min_output_observations:
+                objects.remove_track(tr.track_id)
         return self._result(frame, objects, seen, dyn)
 
     def _propose(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, kp: np.ndarray,
