@@ -963,3 +963,27 @@ def test_a_tentative_track_that_misses_a_frame_is_deleted():
     car.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
     (e,) = trk.track(make_frame(17, [(car, T_car[17])]), None, objects).estimates
     assert e.track_id == old
+
+
+def test_box_association_mutual_best_compares_the_boxes_it_joined_by():
+    """The camera drives at 10 m/s; a pedestrian seen once (no velocity: its prediction stands still) walks 0.1 m
+    to the left with a new appearance (no point matches), and a second pedestrian, never seen, now stands where the
+    first one was in the last image. The first's motion-compensated box overlaps its own instance most, its last box
+    as it was the neighbour's: the mutual-best test compares the motion-compensated boxes, by which the join was
+    chosen, so the track stays on its pedestrian (crossing s3: in a group of pedestrians a track went to the
+    neighbour)."""
+    rng = np.random.default_rng(23)
+    ped, other = Body(rng, 2001, 60, (0.6, 1.7, 0.4)), Body(rng, 2002, 60, (0.6, 1.7, 0.4))
+    objects, trk = ObjectMap(), tracker()
+    (e,) = trk.track(make_frame(0, [(ped, make_pose(np.eye(3), np.array([-2.0, 0.8, 15.0])))]), None, objects).estimates
+    tr = objects.tracks[e.track_id]
+    ped.desc = rng.integers(0, 256, ped.desc.shape).astype(np.uint8)
+    frame = make_frame(1, [(ped, make_pose(np.eye(3), np.array([-2.1, 0.8, 15.0]))),
+                           (other, make_pose(np.eye(3), np.array([-2.0 * 14.0 / 15.0, 0.8, 15.0])))], camera_at(1))
+    boxes = {i: np.r_[frame.keypoints.uv[frame.instance_id == i].min(axis=0),
+                      frame.keypoints.uv[frame.instance_id == i].max(axis=0)] for i in (2001, 2002)}
+    moved = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    iou = {i: box_iou(b[None], np.array([moved, tr.last.box2d]))[0] for i, b in boxes.items()}
+    assert iou[2001][0] > max(iou[2002][0], trk.cfg.join_iou) and iou[2002][1] > iou[2001][0]
+    ids = {x.instance_id: x.track_id for x in trk.track(frame, None, objects).estimates}
+    assert ids[2001] == tr.track_id

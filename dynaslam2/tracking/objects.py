@@ -791,8 +791,8 @@ class ObjectTracker:
         last box, as it was (`_last_box`) or moved by its predicted image motion (wrong when the velocity is, or for
         a near object whose origin projects off its visible part), overlaps `box` most (`_join_overlap`; a moved box
         >= join_iou first, so that the last box of an object that has left where this one is now cannot take it), if
-        that is >= join_iou and no box of the frame's instances that can still join a track (`boxes`) overlaps that
-        track more (instance-to-instance association, III-B)."""
+        that is >= join_iou and no box of the frame's instances that can still join a track (`boxes`) overlaps the
+        track's box that chose it (the moved one first) more (instance-to-instance association, III-B)."""
         cfg = self.cfg
         if not np.all(np.isfinite(box)):
             return None
@@ -805,12 +805,17 @@ class ObjectTracker:
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
         iou_moved, iou_last = self._join_overlap(box, moved), self._join_overlap(box, last)
         iou = np.maximum(iou_moved, iou_last)
-        b = int(np.argmax(iou_moved if iou_moved.max() >= cfg.join_iou else iou))
-        if iou[b] < cfg.join_iou:
+        by_moved = iou_moved.max() >= cfg.join_iou
+        score = iou_moved if by_moved else iou
+        b = int(np.argmax(score))
+        if score[b] < cfg.join_iou:
             return None
-        # Mutual best: adjacent instances swapped tracks otherwise, the instances being taken in id order.
-        others = np.maximum(box_iou(moved[b:b + 1], boxes)[0], box_iou(last[b:b + 1], boxes)[0])
-        return recent[b] if iou[b] >= others.max() else None
+        # Mutual best, by the same boxes: adjacent instances swapped tracks otherwise, the instances being taken in
+        # id order.
+        others = box_iou(moved[b:b + 1], boxes)[0]
+        if not by_moved:
+            others = np.maximum(others, box_iou(last[b:b + 1], boxes)[0])
+        return recent[b] if score[b] >= others.max() else None
 
     def _last_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray:
         """The track's last box as it was; without a known velocity (its 3D prediction stands still), moved on at
