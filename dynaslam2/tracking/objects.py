@@ -21,7 +21,6 @@ than `objects.min_output_observations` observations) that finds nothing in a fra
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,11 +30,12 @@ from dynaslam2.config import SlamConfig
 from dynaslam2.eval.objects import box_covered, box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_exp, so3_log, so3_right_jacobian, transform
+from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_log, transform
 from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, predict_object_pose
+from dynaslam2.tracking.object_filter import capped_angular_velocity, filter_position, filter_rotation, gated
 
 DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
 
@@ -118,12 +118,6 @@ def ransac_rigid(A: np.ndarray, B: np.ndarray, hypotheses: int, inlier_m: float,
     return T_best, mask
 
 
-def white_acceleration_noise(sigma: float, dt: float) -> np.ndarray:
-    """(6, 6) process noise of a constant-velocity state (value, rate), 3 axes each, over `dt` under white
-    acceleration of sigma `sigma` (discrete form)."""
-    return sigma**2 * np.kron(np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]), np.eye(3))
-
-
 class ObjectTracker:
     """Algorithms of object tracking; the state lives in `ObjectMap` (and the frame)."""
 
@@ -142,12 +136,8 @@ class ObjectTracker:
         last = track.last
         if not track.velocity_known:
             return last.T_w_o.copy()
-        return predict_object_pose(last.T_w_o, last.v_o, self._capped(last.w_o), timestamp - last.timestamp)
-
-    def _capped(self, w_o: np.ndarray) -> np.ndarray:
-        """`w_o` scaled down to max_angular_speed (axis kept) when faster."""
-        speed = np.linalg.norm(w_o)
-        return w_o * (self.cfg.max_angular_speed / speed) if speed > self.cfg.max_angular_speed else w_o
+        w_o = capped_angular_velocity(last.w_o, self.cfg)
+        return predict_object_pose(last.T_w_o, last.v_o, w_o, timestamp - last.timestamp)
 
     def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray,
                       objects: ObjectMap) -> np.ndarray | None:
@@ -299,20 +289,10 @@ class ObjectTracker:
         if (dt > 0 and np.isfinite(cfg.max_turn_rate)
                 and np.linalg.norm(so3_log(track.last.T_w_o[:3, :3].T @ T_w_o[:3, :3])) > cfg.max_turn_rate * dt):
             return None
-        if self._gated(track, dt, T_w_o[:3, 3],
-                       lambda: self._pose_information(frame, objects, T_w_o, kp[inliers], pts[inliers])[0]):
+        if gated(track, dt, T_w_o[:3, 3],
+                 lambda: self._pose_information(frame, objects, T_w_o, kp[inliers], pts[inliers])[0], cfg):
             return None
         return T_w_o, inliers
-
-    def _gated(self, track: ObjectTrack, dt: float, p_w: np.ndarray, information: Callable[[], np.ndarray]) -> bool:
-        """Validation gate (with the filter and a finite gate_nis): True when the filter's prediction `dt` ahead
-        cannot explain position `p_w` of (3, 3) information `information()` (an association outlier)."""
-        cfg = self.cfg
-        if not (cfg.filter and track.state_mean is not None and np.isfinite(cfg.gate_nis)):
-            return False
-        m, P = self._predict_state(track, dt)
-        y = p_w - m[:3]
-        return float(y @ np.linalg.solve(P[:3, :3] + self._position_noise(information()), y)) > cfg.gate_nis
 
     # ------------------------------------------------------------------ main
     def track(self, frame: Frame, instances: np.ndarray | None, objects: ObjectMap) -> ObjectFrameResult:
@@ -493,8 +473,8 @@ class ObjectTracker:
             dt = frame.timestamp - last.timestamp if last is not None else 0.0
             T_w_o = T_w_o.copy()
             if self.cfg.rotation_filter:
-                T_w_o[:3, :3], w_o = self._filter_rotation(track, dt, T_w_o[:3, :3], rot_cov)
-            p_w, v_w = self._filter(track, dt, T_w_o[:3, 3], info)
+                T_w_o[:3, :3], w_o = filter_rotation(track, dt, T_w_o[:3, :3], rot_cov, self.cfg)
+            p_w, v_w = filter_position(track, dt, T_w_o[:3, 3], info, self.cfg)
             T_w_o[:3, 3] = p_w
             v_o = T_w_o[:3, :3].T @ v_w
         box2d = None if not np.all(np.isfinite(box)) else tuple(float(b) for b in box)
@@ -529,72 +509,6 @@ class ObjectTracker:
         J6 = np.concatenate([J @ R_c_w, -J @ T_c_o[:3, :3] @ hat(X_o)], axis=2)  # world translation, rotation
         info = np.einsum("n,nki,nkj->ij", self.inv_level_sigma2[frame.keypoints.octave[kp]], J6, J6)
         return info[:3, :3], np.linalg.inv(info + 1e-9 * np.eye(6))[3:, 3:]
-
-    def _predict_state(self, track: ObjectTrack, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """(mean (6,), covariance (6, 6)) of the track's filter state predicted `dt` ahead."""
-        I3 = np.eye(3)
-        F = np.eye(6)
-        F[:3, 3:] = dt * I3
-        Q = white_acceleration_noise(self.cfg.accel_sigma, dt)
-        return F @ track.state_mean, F @ track.state_cov @ F.T + Q
-
-    def _position_noise(self, info: np.ndarray) -> np.ndarray:
-        """(3, 3) covariance of a pose-only object position of information `info`, with the floor."""
-        I3 = np.eye(3)
-        return np.linalg.inv(info + 1e-9 * I3) + self.cfg.position_floor_m**2 * I3
-
-    def _filter(self, track: ObjectTrack, dt: float, p_meas: np.ndarray,
-                info: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Constant-velocity Kalman filter of the object-frame origin (white acceleration of sigma
-        `accel_sigma`): predict over `dt`, update with the pose-only position of information `info`
-        (None: prediction only). Returns the filtered (position, world velocity)."""
-        cfg = self.cfg
-        I3 = np.eye(3)
-        if info is not None:
-            R = self._position_noise(info)
-        if track.state_mean is None:
-            track.state_mean = np.r_[p_meas, np.zeros(3)]
-            R0 = R if info is not None else cfg.position_floor_m**2 * I3
-            track.state_cov = np.block([[R0, np.zeros((3, 3))], [np.zeros((3, 3)), cfg.initial_speed_sigma**2 * I3]])
-            return track.state_mean[:3].copy(), track.state_mean[3:].copy()
-        m, P = self._predict_state(track, dt)
-        if info is not None:
-            K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R)
-            m = m + K @ (p_meas - m[:3])
-            P = P - K @ P[:3, :]
-        track.state_mean, track.state_cov = m, 0.5 * (P + P.T)
-        return m[:3].copy(), m[3:].copy()
-
-    def _filter_rotation(self, track: ObjectTrack, dt: float, R_meas: np.ndarray,
-                         rot_cov: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Constant-angular-velocity filter of the object rotation (error state d: R = R_mean Exp(d), object
-        frame; white angular acceleration of sigma `angular_accel_sigma`), mean (the last observation's
-        rotation and w_o, so that a BA's write-back restarts it) and covariance `track.rot_cov`: predict over
-        `dt` with the capped w_o (`predicted_pose`'s turn when the track's velocity is known; the filter's own
-        turn rate otherwise), update with the pose-only rotation `R_meas` of covariance `rot_cov` +
-        rotation_floor_rad^2. `rot_cov` None: `R_meas` is the track's prediction, kept
-        with the last w_o (the covariance is predicted). Returns (rotation, w_o)."""
-        cfg = self.cfg
-        I3 = np.eye(3)
-        R_noise = None if rot_cov is None else rot_cov + cfg.rotation_floor_rad**2 * I3
-        if track.rot_cov is None:  # the track's first observation
-            R0 = R_noise if R_noise is not None else cfg.rotation_floor_rad**2 * I3
-            track.rot_cov = np.block([[R0, np.zeros((3, 3))],
-                                      [np.zeros((3, 3)), cfg.initial_angular_speed_sigma**2 * I3]])
-            return R_meas, np.zeros(3)
-        last = track.last
-        w = self._capped(last.w_o)
-        F = np.block([[so3_exp(-w * dt), so3_right_jacobian(w * dt) * dt], [np.zeros((3, 3)), I3]])
-        P = F @ track.rot_cov @ F.T + white_acceleration_noise(cfg.angular_accel_sigma, dt)
-        if R_noise is None:
-            track.rot_cov = 0.5 * (P + P.T)
-            return R_meas, last.w_o.copy()
-        R = last.T_w_o[:3, :3] @ so3_exp(w * dt)
-        K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R_noise)
-        d = K @ so3_log(R.T @ R_meas)
-        P = P - K @ P[:3, :]
-        track.rot_cov = 0.5 * (P + P.T)
-        return R @ so3_exp(d[:3]), w + d[3:]
 
     def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                     inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, boxes: np.ndarray,
@@ -722,9 +636,9 @@ class ObjectTracker:
         points `X_w`) land on them, the inlier keypoints and points, and the (3, 3) information of the
         translation: the information-weighted mean of the offsets that lie within register_chi2 of it in
         their stereo uncertainty (`_offset_information`; iterated from the median offset), when >=
-        register_min_matches and the validation gate passes (`_gated`). Else the prediction, no match and None:
-        points added at a wrong prediction disagree with the object's others, and the next pose-only optimizations
-        jump between the two sets."""
+        register_min_matches and the validation gate passes (`object_filter.gated`). Else the prediction, no match
+        and None: points added at a wrong prediction disagree with the object's others, and the next pose-only
+        optimizations jump between the two sets."""
         cfg = self.cfg
         none = np.zeros(0, np.int64)
         pts = objects.points.of_track(track.track_id)
@@ -744,7 +658,7 @@ class ObjectTracker:
             shift = np.linalg.solve(info, np.einsum("nij,nj->i", W[inl], offset[inl]))
         T_w_o = T_w_o_pred.copy()
         T_w_o[:3, 3] += shift
-        if self._gated(track, frame.timestamp - track.last.timestamp, T_w_o[:3, 3], lambda: info):
+        if gated(track, frame.timestamp - track.last.timestamp, T_w_o[:3, 3], lambda: info, cfg):
             return T_w_o_pred, none, none, None
         return T_w_o, kp_m[inl], pt_m[inl], info
 
