@@ -980,10 +980,10 @@ def test_box_association_mutual_best_compares_the_boxes_it_joined_by():
     ped.desc = rng.integers(0, 256, ped.desc.shape).astype(np.uint8)
     frame = make_frame(1, [(ped, make_pose(np.eye(3), np.array([-2.1, 0.8, 15.0]))),
                            (other, make_pose(np.eye(3), np.array([-2.0 * 14.0 / 15.0, 0.8, 15.0])))], camera_at(1))
-    boxes = {i: np.r_[frame.keypoints.uv[frame.instance_id == i].min(axis=0),
-                      frame.keypoints.uv[frame.instance_id == i].max(axis=0)] for i in (2001, 2002)}
+    inst_ids = np.array([2001, 2002])
+    boxes = trk._keypoint_boxes(frame, frame.instance_id > 0, inst_ids)
     moved = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
-    iou = {i: box_iou(b[None], np.array([moved, tr.last.box2d]))[0] for i, b in boxes.items()}
+    iou = {i: box_iou(b[None], np.array([moved, tr.last.box2d]))[0] for i, b in zip(inst_ids.tolist(), boxes)}
     assert iou[2001][0] > max(iou[2002][0], trk.cfg.join_iou) and iou[2002][1] > iou[2001][0]
     ids = {x.instance_id: x.track_id for x in trk.track(frame, None, objects).estimates}
     assert ids[2001] == tr.track_id
