@@ -533,6 +533,23 @@ class ObjectsConfig:
     # box with a window of 0.3 s: 29 of 32, 24 switches (unoccluded 1), 0.230 m.
     box_velocity_window_s: float = 0.5
     join_contain: float = 0.8
+    # Not in the paper: an instance with >= min_inliers close keypoints that no box reached join_iou with joins the
+    # velocity-known track whose predicted box it overlaps and whose centre lies within box_gate_chi2 (chi2, 2 dof,
+    # 95 %; 0: off) of the instance's box centre, in the position filter's predicted covariance projected into the
+    # image plus a box-centre noise of box_gate_size_sigma of the instance's box size per axis (DeepSORT's
+    # Mahalanobis gate), mutual best among the instances of its pass: a prediction a few pixels beside a narrow
+    # pedestrian's box overlaps it too little for join_iou (crossing s3 gt25: moved box IoU 0.18, d2 2.4 at f109;
+    # s14 gt11, a car whose last box an occluder had cut: 0.13 and 3.9 at f59). The overlap bounds the gate where
+    # the projected covariance is large (a passing car, a box clipped to the image border, which it joined without
+    # the overlap test: object ATE 0.197 -> 0.246 m on traffic, crossing, static s10-14). bench_dynamic's
+    # scenarios (world 3, 150 fr, 640x480), off -> on (one value each): seeds 0-4 short gaps kept 33/34 -> 34/34,
+    # id switches 11 -> 10 (unoccluded 0 -> 0), object ATE 0.235 -> 0.239 m, TP 0.824 -> 0.827, ego ATE 0.0217 ->
+    # 0.0218 m; seeds 5-9 25/25 either way, 3 -> 3, 0.177 -> 0.176 m, 0.0268 -> 0.0269 m; following seeds 10-19
+    # 2/2, 0 -> 0, 0.186 -> 0.190 m, 0.0262 m; traffic, crossing, static seeds 10-14 49/53 -> 50/53, 8 -> 9 (0 ->
+    # 0), 0.197 -> 0.202 m, 0.0248 -> 0.0245 m. Re-anchoring a gate-joined track on its instance as well: 11
+    # switches, 0.205 m on seeds 10-14 (not taken).
+    box_gate_chi2: float = 5.991
+    box_gate_size_sigma: float = 0.25
     # A track joined by box IoU is translated from its prediction onto the instance's keypoints that
     # match its points (3D offsets), when at least register_min_matches agree: an offset agrees when it lies
     # within register_chi2 (3 dof) of the registered shift in its stereo uncertainty (along the viewing ray the
@@ -672,8 +689,9 @@ class ObjectsConfig:
                      "rotation_floor_rad", "initial_angular_speed_sigma", "register_chi2"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
-        for name in ("coast_max_s", "box_velocity_window_s", "pose_disparity_weight", "n_features",
-                     "features_max_level", "densify_features", "densify_max_level"):
+        for name in ("coast_max_s", "box_velocity_window_s", "box_gate_chi2", "box_gate_size_sigma",
+                     "pose_disparity_weight", "n_features", "features_max_level", "densify_features",
+                     "densify_max_level"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"objects.{name}: expected >= 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",

@@ -578,14 +578,14 @@ def test_image_extrapolated_box_moves_with_the_unclipped_edges():
 def test_box_association_joins_an_object_emerging_around_its_last_box(contain):
     """A parked car seen only by its right quarter (the rest behind an occluder) re-appears whole with a new
     appearance: its last box lies inside the instance's box with an IoU of ~0.25 (< join_iou), and it keeps its
-    id only by the containment test (objects.join_contain)."""
+    id only by the containment test (objects.join_contain; the Mahalanobis gate, which keeps it too, off)."""
     rng = np.random.default_rng(22)
     car = Body(rng, 1001, 160, (4.0, 1.5, 1.5))
     part = Body(rng, 1001, 0, (1.0, 1.0, 1.0))
     visible = car.X_b[:, 0] > 1.0
     part.X_b, part.desc = car.X_b[visible], car.desc[visible]
     T_car = make_pose(np.eye(3), np.array([0.0, 0.8, 15.0]))
-    objects, trk = ObjectMap(), tracker(f"objects.join_contain={contain}")
+    objects, trk = ObjectMap(), tracker(f"objects.join_contain={contain}", "objects.box_gate_chi2=0")
     e = track_alone(trk, objects, part, [T_car] * 3)
     car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
     frame = make_frame(3, [(car, T_car)])
@@ -987,3 +987,29 @@ def test_box_association_mutual_best_compares_the_boxes_it_joined_by():
     assert iou[2001][0] > max(iou[2002][0], trk.cfg.join_iou) and iou[2002][1] > iou[2001][0]
     ids = {x.instance_id: x.track_id for x in trk.track(frame, None, objects).estimates}
     assert ids[2001] == tr.track_id
+
+
+@pytest.mark.parametrize("gate_chi2", [0.0, 5.991])
+def test_box_gate_keeps_a_pedestrian_that_reappears_beside_its_predicted_box(gate_chi2):
+    """A pedestrian 18 m away walking across at 1 m/s is hidden for 0.3 s and reappears, new in appearance, 0.4 m
+    further than its constant-velocity prediction (it sped up): its predicted box barely overlaps its instance's
+    (IoU < join_iou), but the instance lies within the Mahalanobis gate of the filter's predicted position
+    (objects.box_gate_chi2), so the pedestrian keeps its id; without the gate it starts a new track (crossing s3 and
+    s11: pedestrians 17-20 m away lost this way). A second pedestrian 1.5 m further on, in the same frame, is
+    outside the gate and does not take the track."""
+    rng = np.random.default_rng(31)
+    ped = Body(rng, 2001, 60, (0.45, 1.7, 0.4))
+    T_ped = [make_pose(np.eye(3), np.array([-3.0 + 0.1 * i, 0.3, 18.0])) for i in range(5)]
+    objects, trk = ObjectMap(), tracker(f"objects.box_gate_chi2={gate_chi2}")
+    e = track_alone(trk, objects, ped, T_ped)
+    ped.inst, ped.desc = 2002, rng.integers(0, 256, ped.desc.shape).astype(np.uint8)
+    other = Body(rng, 2003, 60, (0.45, 1.7, 0.4))
+    T_back = make_pose(np.eye(3), np.array([-3.0 + 0.1 * 8 + 0.4, 0.3, 18.0]))
+    frame = make_frame(8, [(ped, T_back), (other, T_back @ make_pose(np.eye(3), np.array([1.5, 0.0, 0.0])))])
+    tr = objects.tracks[e.track_id]
+    moved = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    inst_boxes = trk._keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), np.array([2002, 2003]))
+    assert box_iou(moved[None], inst_boxes).max() < trk.cfg.join_iou
+    estimates = trk.track(frame, None, objects).estimates
+    assert (e.track_id in {x.track_id for x in estimates}) == (gate_chi2 > 0)
+    assert all(x.instance_id == 2002 for x in estimates if x.track_id == e.track_id)

@@ -14,7 +14,8 @@ Unclaimed instances with enough close keypoints with depth become objects, unles
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
-association). Then instances with too few close keypoints keep, by their box alone, a track seen within
+association; failing that, their box centre lies within the Mahalanobis gate of a velocity-known object's predicted
+box, `objects.box_gate_chi2`). Then instances with too few close keypoints keep, by their box alone, a track seen within
 `objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). A tentative track (fewer
 than `objects.min_output_observations` observations) that finds nothing in a frame is deleted.
 """
@@ -35,7 +36,8 @@ from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, predict_object_pose
-from dynaslam2.tracking.object_filter import capped_angular_velocity, filter_position, filter_rotation, gated
+from dynaslam2.tracking.object_filter import (capped_angular_velocity, filter_position, filter_rotation, gated,
+                                               predict_state)
 
 DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
 
@@ -515,7 +517,8 @@ class ObjectTracker:
                     free: np.ndarray) -> int | None:
         """An unclaimed instance (`points`: its `_instance_points`): joins an unseen track (point votes with >=
         min_inliers close keypoints for a track predicted in view (`_in_view`), then box IoU with a track observed
-        within join_max_gap_s, or within coast_max_s when the instance has fewer close keypoints: no points then,
+        within join_max_gap_s (or its Mahalanobis gate, `_join_by_gate`), or within coast_max_s by IoU alone when the
+        instance has fewer close keypoints: no points then,
         then the voted track whose pose failed when the instance's box touches its box) or, with >= min_new_points
         close keypoints (or, on a small instance, >= min_inliers that are >= small_new_fraction of its keypoints),
         creates an object at the centroid of its points with identity rotation (III-B)."""
@@ -539,7 +542,7 @@ class ObjectTracker:
         # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join when
         # the instance's box touches the voted track's (`_touches`), e.g. after the box join's window lapsed.
         tr = self._join_by_box(frame, objects, unseen, pred, box, boxes,
-                               cfg.join_max_gap_s if enough else cfg.coast_max_s)
+                               cfg.join_max_gap_s if enough else cfg.coast_max_s, enough)
         if tr is None and voted is not None and self._touches(frame, objects, voted[0], pred[voted[0].track_id], box):
             tr = voted[0]
         if tr is not None:
@@ -699,14 +702,15 @@ class ObjectTracker:
         return T_w_o
 
     def _join_by_box(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
-                     box: np.ndarray, boxes: np.ndarray, max_gap_s: float) -> ObjectTrack | None:
+                     box: np.ndarray, boxes: np.ndarray, max_gap_s: float, gate: bool) -> ObjectTrack | None:
         """The unseen track observed within `max_gap_s` (measured or box-joined: SORT's max_age counts from the
         newest matched detection) and with a predicted box (`predicted_box`: not passed behind the camera) whose
         last box, as it was (`_last_box`) or moved by its predicted image motion (wrong when the velocity is, or for
         a near object whose origin projects off its visible part), overlaps `box` most (`_join_overlap`; a moved box
         >= join_iou first, so that the last box of an object that has left where this one is now cannot take it), if
         that is >= join_iou and no box of the frame's instances that can still join a track (`boxes`) overlaps the
-        track's box that chose it (the moved one first) more (instance-to-instance association, III-B)."""
+        track's box that chose it (the moved one first) more (instance-to-instance association, III-B); failing that,
+        with `gate`, `_join_by_gate`."""
         cfg = self.cfg
         if not np.all(np.isfinite(box)):
             return None
@@ -723,13 +727,50 @@ class ObjectTracker:
         score = iou_moved if by_moved else iou
         b = int(np.argmax(score))
         if score[b] < cfg.join_iou:
-            return None
+            return self._join_by_gate(frame, recent, pred, moved, iou_moved, box, boxes) if gate else None
         # Mutual best, by the same boxes: adjacent instances swapped tracks otherwise, the instances being taken in
         # id order.
         others = box_iou(moved[b:b + 1], boxes)[0]
         if not by_moved:
             others = np.maximum(others, box_iou(last[b:b + 1], boxes)[0])
         return recent[b] if score[b] >= others.max() else None
+
+    def _join_by_gate(self, frame: Frame, recent: list[ObjectTrack], pred: dict[int, np.ndarray], moved: np.ndarray,
+                      iou_moved: np.ndarray, box: np.ndarray, boxes: np.ndarray) -> ObjectTrack | None:
+        """The velocity-known track among `recent` whose predicted box (`moved`) overlaps `box` (`iou_moved` > 0)
+        and is nearest to it within box_gate_chi2 (`_gate_distance`), when `box` is also the nearest to it of the
+        instances that can still join (`boxes`). The overlap bounds the gate where the projected covariance is
+        large (a car passing the camera, a box clipped to the image border)."""
+        cfg = self.cfg
+        if not (cfg.box_gate_chi2 > 0 and cfg.filter):
+            return None
+        d2 = np.array([self._gate_distance(frame, tr, pred[tr.track_id], mb, box[None])[0]
+                       if tr.velocity_known and tr.state_mean is not None and overlap > 0 else np.inf
+                       for tr, mb, overlap in zip(recent, moved, iou_moved)])
+        b = int(np.argmin(d2))
+        if not d2[b] <= cfg.box_gate_chi2:
+            return None
+        others = self._gate_distance(frame, recent[b], pred[recent[b].track_id], moved[b], boxes)
+        return recent[b] if d2[b] <= others.min() else None
+
+    def _gate_distance(self, frame: Frame, track: ObjectTrack, T_w_o_pred: np.ndarray, moved: np.ndarray,
+                       boxes: np.ndarray) -> np.ndarray:
+        """Squared Mahalanobis distance of each of `boxes`' centres from the centre of the track's predicted box
+        `moved`: the position filter's predicted covariance (`predict_state`) through the projection's Jacobian at the
+        predicted object-frame origin, plus (box_gate_size_sigma x each box's width, height)^2; inf behind the
+        camera."""
+        cfg = self.cfg
+        P = predict_state(track, frame.timestamp - track.last.timestamp, cfg)[1][:3, :3]
+        x, y, z = transform(frame.T_c_w, T_w_o_pred[:3, 3][None])[0]
+        if z <= 1e-3:
+            return np.full(len(boxes), np.inf)
+        fx, fy = self.camera.fx, self.camera.fy
+        J = np.array([[fx / z, 0.0, -fx * x / z**2], [0.0, fy / z, -fy * y / z**2]]) @ frame.T_c_w[:3, :3]
+        box_var = (cfg.box_gate_size_sigma * (boxes[:, 2:] - boxes[:, :2]))**2
+        S = J @ P @ J.T + box_var[:, :, None] * np.eye(2)
+        r = 0.5 * (boxes[:, :2] + boxes[:, 2:] - moved[:2] - moved[2:])
+        d2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[:, :, None])[:, :, 0])
+        return np.where(np.isfinite(d2), d2, np.inf)
 
     def _last_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray:
         """The track's last box as it was; without a known velocity (its 3D prediction stands still), moved on at
