@@ -14,10 +14,11 @@ Unclaimed instances with enough close keypoints with depth become objects, unles
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
-association; failing that, their box centre lies within the Mahalanobis gate of a velocity-known object's predicted
-box, `objects.box_gate_chi2`). Then instances with too few close keypoints keep, by their box alone, a track seen within
-`objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). A tentative track (fewer
-than `objects.min_output_observations` observations) that finds nothing in a frame is deleted.
+association; failing that, their box centre lies within the Mahalanobis gate of a velocity-known
+object's predicted box, `objects.box_gate_chi2`). Then instances with too few close keypoints keep,
+by their box alone, a track seen within `objects.coast_max_s` (coasting: its id kept, its predicted
+pose not reported). A tentative track (fewer than `objects.min_output_observations` observations)
+that finds nothing in a frame is deleted.
 """
 
 from __future__ import annotations
