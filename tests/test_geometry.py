@@ -85,3 +85,12 @@ def test_projection_matrices_round_trip_and_validation():
         StereoCamera.from_projection_matrices(nan, P_r, cam.width, cam.height)
     with pytest.raises(InputError, match="baseline"):
         StereoCamera.from_projection_matrices(P_r, P_l, cam.width, cam.height)
+
+
+def test_stereo_projection_jacobian_matches_numerical_differentiation():
+    cam = kitti_like_camera()
+    X_c = np.array([[1.5, -0.4, 12.0], [-6.0, 1.2, 4.5], [0.2, 0.1, 40.0]])
+    eps = 1e-6
+    numeric = np.stack([(cam.project_stereo(X_c + eps * e) - cam.project_stereo(X_c - eps * e)) / (2 * eps)
+                        for e in np.eye(3)], axis=-1)
+    np.testing.assert_allclose(cam.project_stereo_jacobian(X_c), numeric, rtol=1e-6, atol=1e-6)

@@ -57,6 +57,18 @@ class StereoCamera:
         u_r = uv[:, 0] - self.bf / X_c[:, 2]
         return np.concatenate([uv, u_r[:, None]], -1)
 
+    def project_stereo_jacobian(self, X_c: np.ndarray) -> np.ndarray:
+        """(N, 3) points -> (N, 3, 3) Jacobians d(u, v, u_R) / d X_c of `project_stereo`."""
+        X_c = np.asarray(X_c, dtype=float)
+        x, y, z = X_c[:, 0], X_c[:, 1], X_c[:, 2]
+        J = np.zeros((len(X_c), 3, 3))
+        J[:, 0, 0] = J[:, 2, 0] = self.fx / z
+        J[:, 0, 2] = -self.fx * x / z**2
+        J[:, 1, 1] = self.fy / z
+        J[:, 1, 2] = -self.fy * y / z**2
+        J[:, 2, 2] = -(self.fx * x - self.bf) / z**2
+        return J
+
     def backproject(self, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """(N, 2) pixels with (N,) z-depths -> (N, 3) points in the left camera frame."""
         uv = np.asarray(uv, dtype=float)

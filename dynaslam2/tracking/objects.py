@@ -499,14 +499,8 @@ class ObjectTracker:
         T_c_o = frame.T_c_w @ T_w_o
         X_o = objects.points.X_o[pts]
         X_c = X_o @ T_c_o[:3, :3].T + T_c_o[:3, 3]
-        x, y, z = X_c[:, 0], X_c[:, 1], np.maximum(X_c[:, 2], 1e-3)
-        cam = self.camera
-        J = np.zeros((len(kp), 3, 3))  # d(u, v, u_right) / d X_c
-        J[:, 0, 0] = J[:, 2, 0] = cam.fx / z
-        J[:, 0, 2] = -cam.fx * x / z**2
-        J[:, 1, 1] = cam.fy / z
-        J[:, 1, 2] = -cam.fy * y / z**2
-        J[:, 2, 2] = -(cam.fx * x - cam.bf) / z**2
+        X_c[:, 2] = np.maximum(X_c[:, 2], 1e-3)
+        J = self.camera.project_stereo_jacobian(X_c)  # d(u, v, u_right) / d X_c
         J[frame.u_right[kp] < 0, 2, :] = 0.0
         R_c_w = frame.T_c_w[:3, :3]
         J6 = np.concatenate([J @ R_c_w, -J @ T_c_o[:3, :3] @ hat(X_o)], axis=2)  # world translation, rotation
@@ -762,11 +756,10 @@ class ObjectTracker:
         camera."""
         cfg = self.cfg
         P = predict_state(track, frame.timestamp - track.last.timestamp, cfg)[1][:3, :3]
-        x, y, z = transform(frame.T_c_w, T_w_o_pred[:3, 3][None])[0]
-        if z <= 1e-3:
+        X_c = transform(frame.T_c_w, T_w_o_pred[:3, 3][None])
+        if X_c[0, 2] <= 1e-3:
             return np.full(len(boxes), np.inf)
-        fx, fy = self.camera.fx, self.camera.fy
-        J = np.array([[fx / z, 0.0, -fx * x / z**2], [0.0, fy / z, -fy * y / z**2]]) @ frame.T_c_w[:3, :3]
+        J = self.camera.project_stereo_jacobian(X_c)[0, :2] @ frame.T_c_w[:3, :3]
         box_var = (cfg.box_gate_size_sigma * (boxes[:, 2:] - boxes[:, :2]))**2
         S = J @ P @ J.T + box_var[:, :, None] * np.eye(2)
         r = 0.5 * (boxes[:, :2] + boxes[:, 2:] - moved[:2] - moved[2:])
