@@ -15,6 +15,7 @@ from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp, so3_log
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation
 from dynaslam2.optim.object_pose import motion_increment
+from dynaslam2.tracking.box_association import keypoint_boxes
 from dynaslam2.tracking.objects import ObjectTracker, rigid_fit
 
 CAMERA = StereoCamera(400.0, 400.0, 207.5, 119.5, 0.5, 416, 240)
@@ -534,7 +535,7 @@ def test_box_association_prefers_a_motion_compensated_box_to_a_last_box_as_it_wa
     uv = frame.keypoints.uv
     box = np.r_[uv.min(axis=0), uv.max(axis=0)]
     tr_a, tr_b = objects.tracks[ids[1001]], objects.tracks[ids[1002]]
-    moved_b = trk.predicted_box(tr_b, frame, trk.predicted_pose(tr_b, frame.timestamp), objects)
+    moved_b = trk.boxes.predicted_box(tr_b, frame, trk.predicted_pose(tr_b, frame.timestamp), objects)
     assert box_iou(box[None], moved_b[None])[0, 0] < box_iou(box[None], np.asarray(tr_a.last.box2d)[None])[0, 0]
     (e5,) = trk.track(frame, None, objects).estimates
     assert e5.track_id == ids[1002]
@@ -569,9 +570,9 @@ def test_image_extrapolated_box_moves_with_the_unclipped_edges():
     for k, box in enumerate([(100.0, 50.0, 120.0, 110.0), (104.0, 50.0, 124.0, 110.0), (108.0, 50.0, 128.0, 80.0)]):
         track.observations.append(ObjectObservation(k, k * DT, np.eye(4), np.zeros(3), np.zeros(3), 2001,
                                                     np.zeros(0, np.int64), np.zeros(0, np.int64), box))
-    np.testing.assert_allclose(trk.image_extrapolated_box(track, 5 * DT), [120.0, 50.0, 140.0, 80.0])
+    np.testing.assert_allclose(trk.boxes.image_extrapolated_box(track, 5 * DT), [120.0, 50.0, 140.0, 80.0])
     track.observations[:2] = []
-    assert trk.image_extrapolated_box(track, 5 * DT) is None
+    assert trk.boxes.image_extrapolated_box(track, 5 * DT) is None
 
 
 @pytest.mark.parametrize("contain", [0.8, 0.0])
@@ -589,7 +590,7 @@ def test_box_association_joins_an_object_emerging_around_its_last_box(contain):
     e = track_alone(trk, objects, part, [T_car] * 3)
     car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
     frame = make_frame(3, [(car, T_car)])
-    iou = box_iou(np.array([objects.tracks[e.track_id].last.box2d]), trk._keypoint_boxes(
+    iou = box_iou(np.array([objects.tracks[e.track_id].last.box2d]), keypoint_boxes(
         frame, np.ones(len(frame.keypoints), bool), np.array([1001])))[0, 0]
     assert 0.5 * trk.cfg.join_iou <= iou < trk.cfg.join_iou
     (e3,) = trk.track(frame, None, objects).estimates
@@ -615,7 +616,7 @@ def test_box_association_skips_an_object_the_camera_has_passed():
     T_second = T_first @ make_pose(np.eye(3), np.array([0.0, 0.0, 12.0]))  # 5 m ahead at frame 9, as the first at 3
     frame = make_frame(9, [(second, T_second)], camera_at(12))
     tr = objects.tracks[e.track_id]
-    assert trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects) is None
+    assert trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects) is None
     ids = [x.track_id for x in trk.track(frame, None, objects).estimates]
     assert len(ids) == 1 and ids[0] != e.track_id
 
@@ -831,7 +832,7 @@ def test_predicted_box_follows_an_approaching_object_out_of_the_image():
     truth = np.r_[uv.min(axis=0), uv.max(axis=0)]
     X_c = car.X_b + T_car[4][:3, 3]
     assert np.any(CAMERA.project(X_c)[:, 0] > CAMERA.width)  # the car is cut by the image border
-    box = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    box = trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
     assert np.all(box >= 0) and box[2] <= CAMERA.width - 1 and box[3] <= CAMERA.height - 1
     last = np.asarray(tr.last.box2d)
     assert box_iou(box[None], truth[None])[0, 0] > 0.9 > 0.7 > box_iou(last[None], truth[None])[0, 0]
@@ -981,8 +982,8 @@ def test_box_association_mutual_best_compares_the_boxes_it_joined_by():
     frame = make_frame(1, [(ped, make_pose(np.eye(3), np.array([-2.1, 0.8, 15.0]))),
                            (other, make_pose(np.eye(3), np.array([-2.0 * 14.0 / 15.0, 0.8, 15.0])))], camera_at(1))
     inst_ids = np.array([2001, 2002])
-    boxes = trk._keypoint_boxes(frame, frame.instance_id > 0, inst_ids)
-    moved = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    boxes = keypoint_boxes(frame, frame.instance_id > 0, inst_ids)
+    moved = trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
     iou = {i: box_iou(b[None], np.array([moved, tr.last.box2d]))[0] for i, b in zip(inst_ids.tolist(), boxes)}
     assert iou[2001][0] > max(iou[2002][0], trk.cfg.join_iou) and iou[2002][1] > iou[2001][0]
     ids = {x.instance_id: x.track_id for x in trk.track(frame, None, objects).estimates}
@@ -1007,8 +1008,8 @@ def test_box_gate_keeps_a_pedestrian_that_reappears_beside_its_predicted_box(gat
     T_back = make_pose(np.eye(3), np.array([-3.0 + 0.1 * 8 + 0.4, 0.3, 18.0]))
     frame = make_frame(8, [(ped, T_back), (other, T_back @ make_pose(np.eye(3), np.array([1.5, 0.0, 0.0])))])
     tr = objects.tracks[e.track_id]
-    moved = trk.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
-    inst_boxes = trk._keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), np.array([2002, 2003]))
+    moved = trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    inst_boxes = keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), np.array([2002, 2003]))
     assert box_iou(moved[None], inst_boxes).max() < trk.cfg.join_iou
     estimates = trk.track(frame, None, objects).estimates
     assert (e.track_id in {x.track_id for x in estimates}) == (gate_chi2 > 0)

@@ -1,0 +1,210 @@
+"""Instance-to-instance association by 2D boxes (paper III-B: an instance whose box overlaps the box of a recently
+seen object of its class continues that object's track), with SORT's motion-compensated boxes (the last box carried by
+the object's predicted motion, `predicted_box`, or by its image velocity, `image_extrapolated_box`), SORT's max_age
+(the join window counts from the track's newest observation), a mutual-best test among the frame's instances, and,
+where no box overlaps enough, DeepSORT's Mahalanobis gate on the box centre (`objects.box_gate_chi2`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dynaslam2.config import ObjectsConfig
+from dynaslam2.eval.objects import box_covered, box_iou
+from dynaslam2.geometry.camera import StereoCamera
+from dynaslam2.geometry.se3 import transform
+from dynaslam2.map.frame import Frame
+from dynaslam2.map.objects import ObjectMap, ObjectTrack
+from dynaslam2.tracking.object_filter import predict_state
+
+
+def instance_boxes(instances: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """(K, 4) boxes (left, top, right, bottom) in px of the masks of instance ids `ids` (NaN if absent)."""
+    boxes = np.full((len(ids), 4), np.nan)
+    if len(ids) == 0:
+        return boxes
+    rows, cols = np.nonzero(np.isin(instances, ids))
+    lab = instances[rows, cols].astype(np.int64)
+    order = np.argsort(lab, kind="stable")
+    lab, rows, cols = lab[order], rows[order], cols[order]
+    starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]]) if len(lab) else np.zeros(0, np.int64)
+    if len(starts) == 0:
+        return boxes
+    k = np.searchsorted(ids, lab[starts])
+    boxes[k] = np.column_stack([np.minimum.reduceat(cols, starts), np.minimum.reduceat(rows, starts),
+                                np.maximum.reduceat(cols, starts), np.maximum.reduceat(rows, starts)])
+    return boxes
+
+
+def keypoint_boxes(frame: Frame, dyn: np.ndarray, inst_ids: np.ndarray) -> np.ndarray:
+    """Boxes of each instance's keypoints (when the instance image is not given)."""
+    boxes = np.full((len(inst_ids), 4), np.nan)
+    for k, inst in enumerate(inst_ids.tolist()):
+        uv = frame.keypoints.uv[dyn & (frame.instance_id == inst)]
+        boxes[k] = [*uv.min(0), *uv.max(0)]
+    return boxes
+
+class BoxAssociation:
+    """Box association of a frame's unclaimed instances with the tracks not seen in it (state in the tracks)."""
+
+    def __init__(self, cfg: ObjectsConfig, camera: StereoCamera) -> None:
+        self.cfg = cfg
+        self.camera = camera
+
+    def predicted_box(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray,
+                      objects: ObjectMap) -> np.ndarray | None:
+        """The object's last 2D box carried into `frame` (instance-to-instance association with motion
+        compensation), clipped to the image: it follows the mean projection of the object points of the last
+        observation (X_o, in `objects`) from the last pose and camera to the predicted
+        pose and this camera, and scales by the median ratio of their depths (an approaching object's
+        box grows; a turn that changes its outline does not count). With fewer than 3 of the points in
+        front of both cameras the object-frame origin moves it; the last box as it was when neither can.
+        None without a last box, or when the points and the origin are all predicted behind this camera
+        (a passed object: its last box as it was would take the instance of the object now there)."""
+        last = track.last
+        if last.box2d is None:
+            return None
+        box = np.asarray(last.box2d, dtype=float)
+        X_o = objects.points.X_o[last.pt_ids]
+        motion = None
+        if last.T_c_w is not None:
+            if not np.any(transform(frame.T_c_w @ T_w_o_pred, np.vstack([X_o, np.zeros((1, 3))]))[:, 2] > 1e-3):
+                return None
+            motion = self._image_motion(track, frame, T_w_o_pred, X_o, 3)
+            if motion is None:
+                motion = self._image_motion(track, frame, T_w_o_pred, np.zeros((1, 3)), 1)
+        if motion is not None:
+            uv_last, uv_pred, scale = motion
+            box = np.r_[uv_pred, uv_pred] + scale * (box - np.r_[uv_last, uv_last])
+        return np.clip(box, 0.0, [self.camera.width - 1, self.camera.height - 1] * 2)
+
+    def image_extrapolated_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray | None:
+        """The last 2D box moved on to `timestamp` at the image velocity of the track's boxes since its observation
+        box_velocity_window_s before the last one (SORT's constant-velocity box). Per image axis the box edge that
+        moved least gives the motion: an occluder or the image border clips the other edge, which then moves with
+        it. None without such an earlier box."""
+        last = track.last
+        if last.box2d is None:
+            return None
+        earlier = None  # the oldest boxed observation within the window, searched back from the newest
+        for o in reversed(track.observations):
+            if last.timestamp - o.timestamp > self.cfg.box_velocity_window_s:
+                break
+            if o is not last and o.box2d is not None:
+                earlier = o
+        if earlier is None:
+            return None
+        box = np.asarray(last.box2d, dtype=float)
+        moved = (box - np.asarray(earlier.box2d, dtype=float)).reshape(2, 2)  # rows: min, max corner; columns: u, v
+        per_s = moved[np.argmin(np.abs(moved), axis=0), [0, 1]] / (last.timestamp - earlier.timestamp)
+        return box + np.tile(per_s * (timestamp - last.timestamp), 2)
+
+    def _image_motion(self, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray,
+                      min_points: int) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """(mean pixel in the last observation, mean pixel at the predicted pose in `frame`, median
+        depth ratio last / predicted) of the object-frame points `X_o` in front of both cameras; None
+        with fewer than `min_points` of them."""
+        last = track.last
+        X_c_last = transform(last.T_c_w @ last.T_w_o, X_o)
+        X_c_pred = transform(frame.T_c_w @ T_w_o_pred, X_o)
+        front = (X_c_last[:, 2] > 1e-3) & (X_c_pred[:, 2] > 1e-3)
+        if np.count_nonzero(front) < min_points:
+            return None
+        X_c_last, X_c_pred = X_c_last[front], X_c_pred[front]
+        return (self.camera.project(X_c_last).mean(axis=0), self.camera.project(X_c_pred).mean(axis=0),
+                float(np.median(X_c_last[:, 2] / X_c_pred[:, 2])))  # image size ~ 1 / depth
+
+    def touches(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                box: np.ndarray) -> bool:
+        """Whether `box` overlaps the track's last box (`_last_box`) or its predicted box at all: a vote whose pose
+        failed joins only a track that could be there (a false vote took a bus leaving at the right border to an
+        instance entering at the left)."""
+        moved = self.predicted_box(track, frame, T_w_o_pred, objects)
+        track_boxes = [self._last_box(track, frame.timestamp)] + ([moved] if moved is not None else [])
+        return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
+
+    def join(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
+             box: np.ndarray, boxes: np.ndarray, max_gap_s: float, gate: bool) -> ObjectTrack | None:
+        """The unseen track observed within `max_gap_s` (measured or box-joined: SORT's max_age counts from the
+        newest matched detection) and with a predicted box (`predicted_box`: not passed behind the camera) whose
+        last box, as it was (`_last_box`) or moved by its predicted image motion (wrong when the velocity is, or for
+        a near object whose origin projects off its visible part), overlaps `box` most (`_join_overlap`; a moved box
+        >= join_iou first, so that the last box of an object that has left where this one is now cannot take it), if
+        that is >= join_iou and no box of the frame's instances that can still join a track (`boxes`) overlaps the
+        track's box that chose it (the moved one first) more (instance-to-instance association, III-B); failing that,
+        with `gate`, `_join_by_gate`."""
+        cfg = self.cfg
+        if not np.all(np.isfinite(box)):
+            return None
+        recent = [tr for tr in unseen if frame.timestamp - tr.last.timestamp <= max_gap_s]
+        moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects) for tr in recent]
+        recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
+        if not recent:
+            return None
+        moved = np.array(moved)
+        last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
+        iou_moved, iou_last = self._join_overlap(box, moved), self._join_overlap(box, last)
+        iou = np.maximum(iou_moved, iou_last)
+        by_moved = iou_moved.max() >= cfg.join_iou
+        score = iou_moved if by_moved else iou
+        b = int(np.argmax(score))
+        if score[b] < cfg.join_iou:
+            return self._join_by_gate(frame, recent, pred, moved, iou_moved, box, boxes) if gate else None
+        # Mutual best, by the same boxes: adjacent instances swapped tracks otherwise, the instances being taken in
+        # id order.
+        others = box_iou(moved[b:b + 1], boxes)[0]
+        if not by_moved:
+            others = np.maximum(others, box_iou(last[b:b + 1], boxes)[0])
+        return recent[b] if score[b] >= others.max() else None
+
+    def _join_by_gate(self, frame: Frame, recent: list[ObjectTrack], pred: dict[int, np.ndarray], moved: np.ndarray,
+                      iou_moved: np.ndarray, box: np.ndarray, boxes: np.ndarray) -> ObjectTrack | None:
+        """The velocity-known track among `recent` whose predicted box (`moved`) overlaps `box` (`iou_moved` > 0)
+        and is nearest to it within box_gate_chi2 (`_gate_distance`), when `box` is also the nearest to it of the
+        instances that can still join (`boxes`). The overlap bounds the gate where the projected covariance is
+        large (a car passing the camera, a box clipped to the image border)."""
+        cfg = self.cfg
+        if not (cfg.box_gate_chi2 > 0 and cfg.filter):
+            return None
+        d2 = np.array([self._gate_distance(frame, tr, pred[tr.track_id], mb, box[None])[0]
+                       if tr.velocity_known and tr.state_mean is not None and overlap > 0 else np.inf
+                       for tr, mb, overlap in zip(recent, moved, iou_moved)])
+        b = int(np.argmin(d2))
+        if not d2[b] <= cfg.box_gate_chi2:
+            return None
+        others = self._gate_distance(frame, recent[b], pred[recent[b].track_id], moved[b], boxes)
+        return recent[b] if d2[b] <= others.min() else None
+
+    def _gate_distance(self, frame: Frame, track: ObjectTrack, T_w_o_pred: np.ndarray, moved: np.ndarray,
+                       boxes: np.ndarray) -> np.ndarray:
+        """Squared Mahalanobis distance of each of `boxes`' centres from the centre of the track's predicted box
+        `moved`: the position filter's predicted covariance (`predict_state`) through the projection's Jacobian at the
+        predicted object-frame origin, plus (box_gate_size_sigma x each box's width, height)^2; inf behind the
+        camera."""
+        cfg = self.cfg
+        P = predict_state(track, frame.timestamp - track.last.timestamp, cfg)[1][:3, :3]
+        X_c = transform(frame.T_c_w, T_w_o_pred[:3, 3][None])
+        if X_c[0, 2] <= 1e-3:
+            return np.full(len(boxes), np.inf)
+        J = self.camera.project_stereo_jacobian(X_c)[0, :2] @ frame.T_c_w[:3, :3]
+        box_var = (cfg.box_gate_size_sigma * (boxes[:, 2:] - boxes[:, :2]))**2
+        S = J @ P @ J.T + box_var[:, :, None] * np.eye(2)
+        r = 0.5 * (boxes[:, :2] + boxes[:, 2:] - moved[:2] - moved[2:])
+        d2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[:, :, None])[:, :, 0])
+        return np.where(np.isfinite(d2), d2, np.inf)
+
+    def _last_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray:
+        """The track's last box as it was; without a known velocity (its 3D prediction stands still), moved on at
+        its image velocity (`image_extrapolated_box`) when it has one."""
+        moving = None if track.velocity_known else self.image_extrapolated_box(track, timestamp)
+        return np.asarray(track.last.box2d if moving is None else moving, dtype=float)
+
+    def _join_overlap(self, box: np.ndarray, track_boxes: np.ndarray) -> np.ndarray:
+        """IoU of the instance's `box` with each of `track_boxes`, raised to join_iou for a track box that lies >=
+        join_contain inside `box` with an IoU of >= join_iou / 2 (an object emerging from behind an occluder: its
+        box grows around the partly visible last one)."""
+        cfg = self.cfg
+        iou = box_iou(box[None], track_boxes)[0]
+        if not cfg.join_contain:
+            return iou
+        inside = box_covered(box[None], track_boxes)[0] >= cfg.join_contain
+        return np.where(inside & (iou >= 0.5 * cfg.join_iou), np.maximum(iou, cfg.join_iou), iou)
