@@ -16,7 +16,7 @@ from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation
 from dynaslam2.optim.object_pose import motion_increment
 from dynaslam2.tracking.box_association import keypoint_boxes
-from dynaslam2.tracking.objects import ObjectTracker, rigid_fit
+from dynaslam2.tracking.objects import ObjectTracker, PoseProposal, first_claim, rigid_fit
 
 CAMERA = StereoCamera(400.0, 400.0, 207.5, 119.5, 0.5, 416, 240)
 SCALES = 1.2 ** np.arange(8)
@@ -133,6 +133,23 @@ def test_position_filter_converges_to_the_constant_velocity_motion():
     T_off = inverse(T_true[0]) @ objects.tracks[e.track_id].observations[0].T_w_o
     assert np.linalg.norm(e.T_w_o[:3, 3] - (T_true[11] @ T_off)[:3, 3]) < 0.02
     assert np.linalg.norm(e.v_w - v_w) < 0.2
+
+
+def test_equal_inliers_on_one_instance_go_to_the_pose_nearer_its_prediction():
+    """Crossing s14 f121: the tracks of two pedestrians side by side each fitted 7 inliers on one of their
+    instances, and the lower track id took it: the neighbour's track, 1.2 m from its prediction, for one frame
+    (an id switch and back). Equal counts now go to the pose that its track's motion explains; more inliers still
+    win, and the track id decides only a full tie."""
+    def proposal(x: float, n_inliers: int) -> PoseProposal:
+        return PoseProposal(make_pose(np.eye(3), np.array([x, 0.5, 20.0])), np.arange(10), np.arange(10),
+                            np.arange(10) < n_inliers, 2027)
+
+    pred = {11: make_pose(np.eye(3), np.array([-1.2, 0.5, 20.0])), 13: make_pose(np.eye(3), np.array([0.0, 0.5, 20.0]))}
+    assert first_claim({11: proposal(0.0, 7), 13: proposal(0.05, 7)}, pred) == 13
+    assert first_claim({11: proposal(0.0, 8), 13: proposal(0.05, 7)}, pred) == 11
+    assert first_claim({11: None, 13: proposal(0.05, 7)}, pred) == 13
+    same = {11: make_pose(np.eye(3), np.array([0.0, 0.5, 20.0])), 13: pred[13]}
+    assert first_claim({11: proposal(0.0, 7), 13: proposal(0.0, 7)}, same) == 11
 
 
 def noisy(frame: Frame, rng: np.random.Generator, sigma_px: float) -> Frame:

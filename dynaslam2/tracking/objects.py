@@ -69,6 +69,13 @@ def dynamic_keypoints(frame: Frame) -> np.ndarray:
     return ~frame.static & (frame.instance_id > 0) & np.isin(frame.class_id, DYNAMIC_CLASS_IDS)
 
 
+def first_claim(proposals: dict[int, PoseProposal | None], pred: dict[int, np.ndarray]) -> int:
+    """The track whose pose proposal claims its instance first: the most inliers; among equal counts, the pose
+    nearest its track's prediction `pred` (a neighbour's track whose points also fit the instance had to move
+    further to do so), then the lower track id."""
+    return min((k for k, p in proposals.items() if p is not None),
+               key=lambda k: (-np.count_nonzero(proposals[k].inliers),
+                              float(np.linalg.norm(proposals[k].T_w_o[:3, 3] - pred[k][:3, 3])), k))
 
 
 def rigid_fit(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -240,14 +247,13 @@ class ObjectTracker:
                 if match is not None:
                     candidates[tr.track_id] = match
         # Pose per object on one instance; an instance holds one object: the one whose pose it supports with the
-        # most inliers. An object whose instance went to another tries its next instance.
+        # most inliers (`first_claim`). An object whose instance went to another tries its next instance.
         claimed: set[int] = set()
         seen: list[int] = []
         proposals = {tid: self._propose(frame, objects, objects.tracks[tid], pred[tid], *candidates[tid], free, claimed)
                      for tid in candidates}
         while any(p is not None for p in proposals.values()):
-            tid = min((k for k, p in proposals.items() if p is not None),
-                      key=lambda k: (-np.count_nonzero(proposals[k].inliers), k))
+            tid = first_claim(proposals, pred)
             best = proposals.pop(tid)
             kp, pts = best.kp[best.inliers], best.pts[best.inliers]
             inst = int(np.searchsorted(inst_ids, best.instance_id))
