@@ -13,9 +13,10 @@ from dynaslam2.features.orb import Keypoints
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp, so3_log
 from dynaslam2.map.frame import Frame
-from dynaslam2.map.objects import ObjectMap, ObjectObservation
+from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import motion_increment
 from dynaslam2.tracking.box_association import keypoint_boxes
+from dynaslam2.tracking.object_filter import filter_position
 from dynaslam2.tracking.objects import ObjectTracker, PoseProposal, first_claim, rigid_fit
 
 CAMERA = StereoCamera(400.0, 400.0, 207.5, 119.5, 0.5, 416, 240)
@@ -133,6 +134,27 @@ def test_position_filter_converges_to_the_constant_velocity_motion():
     T_off = inverse(T_true[0]) @ objects.tracks[e.track_id].observations[0].T_w_o
     assert np.linalg.norm(e.T_w_o[:3, 3] - (T_true[11] @ T_off)[:3, 3]) < 0.02
     assert np.linalg.norm(e.v_w - v_w) < 0.2
+
+
+@pytest.mark.parametrize("cls", ["pedestrian", "car"])
+def test_a_young_pedestrian_track_takes_its_velocity_from_the_class_prior(cls):
+    """A standing object seen at 20 m with 0.1 m of position noise: after its first two filtered positions a
+    pedestrian's velocity stays within a walking speed (prior objects.pedestrian_initial_speed_sigma), while a
+    car's (initial_speed_sigma) is the noise's difference quotient, metres per second."""
+    cfg = load_config(None, ["mode=dynamic"]).objects
+    rng = np.random.default_rng(4)
+    info = np.eye(3) / 0.1**2
+    speeds = []
+    for _ in range(200):
+        track = ObjectTrack(0, cls)
+        for _ in range(2):
+            _, v_w = filter_position(track, DT, np.array([1.0, 0.0, 20.0]) + rng.normal(0.0, 0.1, 3), info, cfg)
+        speeds.append(np.linalg.norm(v_w))
+    rms = float(np.sqrt(np.mean(np.square(speeds))))
+    if cls == "pedestrian":
+        assert rms < 1.0
+    else:
+        assert rms > 1.5
 
 
 def test_equal_inliers_on_one_instance_go_to_the_pose_nearer_its_prediction():

@@ -50,7 +50,8 @@ def filter_position(track: ObjectTrack, dt: float, p_meas: np.ndarray, info: np.
     if track.state_mean is None:
         track.state_mean = np.r_[p_meas, np.zeros(3)]
         R0 = R if info is not None else cfg.position_floor_m**2 * I3
-        track.state_cov = np.block([[R0, np.zeros((3, 3))], [np.zeros((3, 3)), cfg.initial_speed_sigma**2 * I3]])
+        speed_sigma = cfg.pedestrian_initial_speed_sigma if track.cls == "pedestrian" else cfg.initial_speed_sigma
+        track.state_cov = np.block([[R0, np.zeros((3, 3))], [np.zeros((3, 3)), speed_sigma**2 * I3]])
         return track.state_mean[:3].copy(), track.state_mean[3:].copy()
     m, P = predict_state(track, dt, cfg)
     if info is not None:
