@@ -43,6 +43,7 @@ def keypoint_boxes(frame: Frame, dyn: np.ndarray, inst_ids: np.ndarray) -> np.nd
         boxes[k] = [*uv.min(0), *uv.max(0)]
     return boxes
 
+
 class BoxAssociation:
     """Box association of a frame's unclaimed instances with the tracks not seen in it (state in the tracks)."""
 

@@ -15,10 +15,10 @@ mostly match the points of one map object of their class not seen in this frame 
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
 association; failing that, their box centre lies within the Mahalanobis gate of a velocity-known
-object's predicted box, `objects.box_gate_chi2`; both in `box_association`). Then instances with too few close keypoints keep,
-by their box alone, a track seen within `objects.coast_max_s` (coasting: its id kept, its predicted
-pose not reported). A tentative track (fewer than `objects.min_output_observations` observations)
-that finds nothing in a frame is deleted.
+object's predicted box, `objects.box_gate_chi2`; both in `box_association`). Then instances with
+too few close keypoints keep, by their box alone, a track seen within `objects.coast_max_s`
+(coasting: its id kept, its predicted pose not reported). A tentative track (fewer than
+`objects.min_output_observations` observations) that finds nothing in a frame is deleted.
 """
 
 from __future__ import annotations
