@@ -274,7 +274,6 @@ def direct_projection_factor(
     if huber_delta_stereo is not None and huber_delta_mono is not None:
         delta2 = np.where(stereo, huber_delta_stereo**2, huber_delta_mono**2)
     rows = np.flatnonzero(np.column_stack([np.ones((n, 2), bool), stereo]).ravel())
-    fx, fy, cx, cy, bf = camera.fx, camera.fy, camera.cx, camera.cy, camera.bf
     keys = [camera_key, object_key] + [int(k) for k in point_keys]
 
     def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
@@ -283,24 +282,16 @@ def direct_projection_factor(
         X = np.array([values.atPoint3(int(k)) for k in point_keys])
         R_c_o = T_w_c[:3, :3].T @ T_w_o[:3, :3]
         X_c = X @ R_c_o.T + T_w_c[:3, :3].T @ (T_w_o[:3, 3] - T_w_c[:3, 3])
-        x, y, z = X_c.T
-        front = z > 0
-        inv_z = 1.0 / np.where(front, z, 1.0)
-        u = fx * x * inv_z + cx
-        pred = np.stack([u, fy * y * inv_z + cy, u - bf * inv_z], -1)
-        r = np.where(front[:, None], pred - meas, 2.0 * fx) * sqrt_info[:, None]
+        front = X_c[:, 2] > 0
+        X_front = np.where(front[:, None], X_c, [0.0, 0.0, 1.0])  # behind the camera: a constant error
+        r = np.where(front[:, None], camera.project_stereo(X_front) - meas, 2.0 * camera.fx) * sqrt_info[:, None]
         r[~stereo, 2] = 0.0
         if disparity_weight is not None:
             r[:, 2] = np.where(stereo, disparity_weight * (r[:, 0] - r[:, 2]), 0.0)
         scale = huber_scale(np.einsum("ij,ij->i", r, r), delta2, H is not None)
         if H is not None:
             # d(u, v, u_R) / d X_c, whitened and weighted, zero behind the camera
-            D = np.zeros((n, 3, 3))
-            D[:, 0, 0] = D[:, 2, 0] = fx * inv_z
-            D[:, 0, 2] = -fx * x * inv_z**2
-            D[:, 2, 2] = -(fx * x - bf) * inv_z**2
-            D[:, 1, 1] = fy * inv_z
-            D[:, 1, 2] = -fy * y * inv_z**2
+            D = camera.project_stereo_jacobian(X_front)
             if disparity_weight is not None:
                 D[:, 2] = disparity_weight * (D[:, 0] - D[:, 2])  # (mono rows: not in `rows`)
             D *= (scale * sqrt_info * front)[:, None, None]
