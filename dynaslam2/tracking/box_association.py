@@ -166,14 +166,14 @@ class BoxAssociation:
         cfg = self.cfg
         if not (cfg.box_gate_chi2 > 0 and cfg.filter):
             return None
-        d2 = np.array([self._gate_distance(frame, tr, pred[tr.track_id], mb, box[None])[0]
-                       if tr.velocity_known and tr.state_mean is not None and overlap > 0 else np.inf
-                       for tr, mb, overlap in zip(recent, moved, iou_moved)])
-        b = int(np.argmin(d2))
-        if not d2[b] <= cfg.box_gate_chi2:
+        candidates = np.vstack([box[None], boxes])  # row 0: `box`; then the instances that can still join
+        d2 = [self._gate_distance(frame, tr, pred[tr.track_id], mb, candidates)
+              if tr.velocity_known and tr.state_mean is not None and overlap > 0 else None
+              for tr, mb, overlap in zip(recent, moved, iou_moved)]
+        b = int(np.argmin([np.inf if d is None else d[0] for d in d2]))
+        if d2[b] is None or not d2[b][0] <= cfg.box_gate_chi2:
             return None
-        others = self._gate_distance(frame, recent[b], pred[recent[b].track_id], moved[b], boxes)
-        return recent[b] if d2[b] <= others.min() else None
+        return recent[b] if d2[b][0] <= d2[b][1:].min() else None
 
     def _gate_distance(self, frame: Frame, track: ObjectTrack, T_w_o_pred: np.ndarray, moved: np.ndarray,
                        boxes: np.ndarray) -> np.ndarray:
