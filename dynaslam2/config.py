@@ -537,7 +537,7 @@ class ObjectsConfig:
     # velocity-known track whose predicted box it overlaps and whose centre lies within box_gate_chi2 (chi2, 2 dof,
     # 95 %; 0: off) of the instance's box centre, in the position filter's predicted covariance projected into the
     # image plus a box-centre noise of box_gate_size_sigma of the instance's box size per axis (DeepSORT's
-    # Mahalanobis gate), mutual best among the instances of its pass: a prediction a few pixels beside a narrow
+    # Mahalanobis gate; the pass's instances assigned jointly): a prediction a few pixels beside a narrow
     # pedestrian's box overlaps it too little for join_iou (crossing s3 gt25: moved box IoU 0.18, d2 2.4 at f109;
     # s14 gt11, a car whose last box an occluder had cut: 0.13 and 3.9 at f59). The overlap bounds the gate where
     # the projected covariance is large (a passing car, a box clipped to the image border, which it joined without

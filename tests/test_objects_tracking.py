@@ -15,7 +15,7 @@ from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp, so3_log
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import motion_increment
-from dynaslam2.tracking.box_association import keypoint_boxes
+from dynaslam2.tracking.box_association import _hungarian, keypoint_boxes
 from dynaslam2.tracking.object_filter import filter_position
 from dynaslam2.tracking.objects import ObjectTracker, PoseProposal, first_claim, rigid_fit
 
@@ -309,7 +309,7 @@ def test_instance_box_association_keeps_the_id_when_no_point_matches():
 def test_box_association_gives_the_track_to_the_instance_it_overlaps_most():
     """A car that changes appearance (no descriptor matches) while a second car appears beside it,
     its box overlapping the first car's (IoU > join_iou) and its instance id taken first: the track
-    goes to the first car's instance (mutual best overlap), the second car starts its own; a
+    goes to the first car's instance (the joint assignment's best overlap), the second car starts its own; a
     pedestrian instance never takes a car's track."""
     rng = np.random.default_rng(6)
     car = Body(rng, 1005, 80, (4.0, 1.5, 1.5))
@@ -331,7 +331,7 @@ def test_box_association_ignores_an_instance_that_cannot_take_the_track():
     """Two pedestrians side by side, the second mostly hidden (5 keypoints, fewer than min_inliers: it can
     neither join a track nor start one) with its box where the first one's track predicts it: the first
     pedestrian, its appearance changed (no descriptor matches) and a little off its prediction, keeps its
-    track id through the box join. (The mutual-best test counted the hidden one's box, which overlaps the
+    track id through the box join. (A mutual-best test counted the hidden one's box, which overlaps the
     track more, and the first pedestrian started a new track every frame: crossing s2's pedestrians 24/25. With
     objects.coast_max_s the hidden one, taken first, coasted on the track: instances with enough keypoints now join
     first, among themselves.)"""
@@ -1005,13 +1005,12 @@ def test_a_tentative_track_that_misses_a_frame_is_deleted():
     assert e.track_id == old
 
 
-def test_box_association_mutual_best_compares_the_boxes_it_joined_by():
+def test_box_association_assigns_by_motion_compensated_boxes_first():
     """The camera drives at 10 m/s; a pedestrian seen once (no velocity: its prediction stands still) walks 0.1 m
     to the left with a new appearance (no point matches), and a second pedestrian, never seen, now stands where the
     first one was in the last image. The first's motion-compensated box overlaps its own instance most, its last box
-    as it was the neighbour's: the mutual-best test compares the motion-compensated boxes, by which the join was
-    chosen, so the track stays on its pedestrian (crossing s3: in a group of pedestrians a track went to the
-    neighbour)."""
+    as it was the neighbour's: the assignment's first stage compares the motion-compensated boxes, so the track
+    stays on its pedestrian (crossing s3: in a group of pedestrians a track went to the neighbour)."""
     rng = np.random.default_rng(23)
     ped, other = Body(rng, 2001, 60, (0.6, 1.7, 0.4)), Body(rng, 2002, 60, (0.6, 1.7, 0.4))
     objects, trk = ObjectMap(), tracker()
@@ -1053,3 +1052,40 @@ def test_box_gate_keeps_a_pedestrian_that_reappears_beside_its_predicted_box(gat
     estimates = trk.track(frame, None, objects).estimates
     assert (e.track_id in {x.track_id for x in estimates}) == (gate_chi2 > 0)
     assert all(x.instance_id == 2002 for x in estimates if x.track_id == e.track_id)
+
+
+def test_box_association_assigns_the_instances_to_the_tracks_jointly():
+    """Two pedestrians stand side by side, hidden for 0.2 s, during which the second steps 0.24 m towards the
+    first; both come back new in appearance (no point matches), the second with the lower instance id. Its box
+    overlaps the first's track more than its own, which the first's instance overlaps more still; its own track
+    still overlaps it by >= join_iou. The joint assignment gives each pedestrian its own track (a greedy join of the
+    instances in id order, with a mutual-best test, gave the second a new track: crossing s10's pedestrian groups)."""
+    rng = np.random.default_rng(41)
+    first, second = Body(rng, 2001, 60, (0.6, 1.7, 0.4)), Body(rng, 2002, 60, (0.6, 1.7, 0.4))
+    at = [make_pose(np.eye(3), np.array([x, 0.6, 12.0])) for x in (-1.0, -0.64, -0.88)]
+    objects, trk = ObjectMap(), tracker()
+    for i in range(5):
+        estimates = trk.track(make_frame(i, [(first, at[0]), (second, at[1])]), None, objects).estimates
+    track_of = {e.instance_id: e.track_id for e in estimates}
+    trk.track(make_frame(5, []), None, objects)
+    trk.track(make_frame(6, []), None, objects)
+    second.inst, second.desc = 2003, rng.integers(0, 256, second.desc.shape).astype(np.uint8)
+    first.inst, first.desc = 2004, rng.integers(0, 256, first.desc.shape).astype(np.uint8)
+    frame = make_frame(7, [(first, at[0]), (second, at[2])])
+    boxes = dict(zip((2003, 2004), keypoint_boxes(frame, frame.instance_id > 0, np.array([2003, 2004]))))
+    last = {inst: objects.tracks[tid].last.box2d for inst, tid in track_of.items()}
+    iou = {(i, j): box_iou(boxes[i][None], np.array([last[j]]))[0, 0] for i in boxes for j in last}
+    assert iou[2004, 2001] > iou[2003, 2001] > iou[2003, 2002] >= trk.cfg.join_iou
+    ids = {e.instance_id: e.track_id for e in trk.track(frame, None, objects).estimates}
+    assert ids == {2003: track_of[2002], 2004: track_of[2001]}
+
+
+def test_hungarian_takes_as_many_allowed_pairs_as_it_can():
+    """Of two instances and two tracks, the first instance may join both tracks, the second only the first track
+    (its overlap with the second is forbidden, say by class, however large): the assignment pairs both (first
+    instance - second track, second - first) rather than the cheapest pairs, of which one is forbidden."""
+    cost = -np.array([[0.9, 0.35], [0.8, 1.0]])
+    ok = np.array([[True, True], [True, False]])
+    assert sorted(_hungarian(cost, ok)) == [(0, 1), (1, 0)]
+    assert _hungarian(cost, np.zeros_like(ok)) == []
+    assert _hungarian(cost[:, :1], ok[:, :1]) == [(0, 0)]

@@ -1,12 +1,14 @@
 """Instance-to-instance association by 2D boxes (paper III-B: an instance whose box overlaps the box of a recently
 seen object of its class continues that object's track), with SORT's motion-compensated boxes (the last box carried by
 the object's predicted motion, `predicted_box`, or by its image velocity, `image_extrapolated_box`), SORT's max_age
-(the join window counts from the track's newest observation), a mutual-best test among the frame's instances, and,
-where no box overlaps enough, DeepSORT's Mahalanobis gate on the box centre (`objects.box_gate_chi2`)."""
+(the join window counts from the track's newest observation), the frame's instances assigned to the tracks jointly
+(SORT's Hungarian assignment), and, where no box overlaps enough, DeepSORT's Mahalanobis gate on the box centre
+(`objects.box_gate_chi2`)."""
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from dynaslam2.config import ObjectsConfig
 from dynaslam2.eval.objects import box_covered, box_iou
@@ -15,6 +17,17 @@ from dynaslam2.geometry.se3 import transform
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectTrack
 from dynaslam2.tracking.object_filter import predict_state
+
+
+
+def _hungarian(cost: np.ndarray, ok: np.ndarray) -> list[tuple[int, int]]:
+    """The (row, column) pairs of the minimum-`cost` assignment among the allowed pairs `ok` that takes as many of
+    them as it can (a forbidden pair costs more than any allowed assignment; SORT's Hungarian assignment)."""
+    if not ok.any():
+        return []
+    forbidden = 1.0 + 2.0 * ok.sum() * np.abs(cost[ok]).max()  # > any two allowed assignments' difference
+    rows, cols = linear_sum_assignment(np.where(ok, cost, forbidden))
+    return [(k, t) for k, t in zip(rows.tolist(), cols.tolist()) if ok[k, t]]
 
 
 def instance_boxes(instances: np.ndarray, ids: np.ndarray) -> np.ndarray:
@@ -123,57 +136,50 @@ class BoxAssociation:
         track_boxes = [self._last_box(track, frame.timestamp)] + ([moved] if moved is not None else [])
         return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
 
-    def join(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
-             box: np.ndarray, boxes: np.ndarray, max_gap_s: float, gate: bool) -> ObjectTrack | None:
-        """The unseen track observed within `max_gap_s` (measured or box-joined: SORT's max_age counts from the
-        newest matched detection) and with a predicted box (`predicted_box`: not passed behind the camera) whose
-        last box, as it was (`_last_box`) or moved by its predicted image motion (wrong when the velocity is, or for
-        a near object whose origin projects off its visible part), overlaps `box` most (`_join_overlap`; a moved box
-        >= join_iou first, so that the last box of an object that has left where this one is now cannot take it), if
-        that is >= join_iou and no box of the frame's instances that can still join a track (`boxes`) overlaps the
-        track's box that chose it (the moved one first) more (instance-to-instance association, III-B); failing that,
-        with `gate`, `_join_by_gate`."""
+    def assign(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
+               boxes: np.ndarray, classes: list[str], max_gap_s: float, gate: bool) -> list[ObjectTrack | None]:
+        """The track each instance box of `boxes` (class `classes`) joins, or None: a joint assignment of the boxes
+        to the `tracks` of their class observed within `max_gap_s` (measured or box-joined: SORT's max_age counts
+        from the newest matched detection) whose predicted box is not passed behind the camera (instance-to-instance
+        association, III-B). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's cascade, each stage over the
+        boxes and tracks the earlier ones left: (1) by the overlap of each track's last box moved by its predicted
+        image motion (`predicted_box`; `_join_overlap` >= join_iou), so that the last box of an object that has
+        left where this one is now cannot take it; (2) by that or the overlap of its last box (`_last_box`: a wrong
+        velocity, or a near object whose origin projects off its visible part, moves the box wrong); (3) with `gate`,
+        by the Mahalanobis distance (`_gate_distance` <= box_gate_chi2) to a velocity-known track whose moved box
+        overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a car passing
+        the camera, a box clipped to the image border)."""
         cfg = self.cfg
-        if not np.all(np.isfinite(box)):
-            return None
-        recent = [tr for tr in unseen if frame.timestamp - tr.last.timestamp <= max_gap_s]
+        joined: list[ObjectTrack | None] = [None] * len(boxes)
+        recent = [tr for tr in tracks if frame.timestamp - tr.last.timestamp <= max_gap_s]
         moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects) for tr in recent]
         recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
-        if not recent:
-            return None
+        if not recent or not len(boxes):
+            return joined
         moved = np.array(moved)
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
-        iou_moved, iou_last = self._join_overlap(box, moved), self._join_overlap(box, last)
-        iou = np.maximum(iou_moved, iou_last)
-        by_moved = iou_moved.max() >= cfg.join_iou
-        score = iou_moved if by_moved else iou
-        b = int(np.argmax(score))
-        if score[b] < cfg.join_iou:
-            return self._join_by_gate(frame, recent, pred, moved, iou_moved, box, boxes) if gate else None
-        # Mutual best, by the same boxes: adjacent instances swapped tracks otherwise, the instances being taken in
-        # id order.
-        others = box_iou(moved[b:b + 1], boxes)[0]
-        if not by_moved:
-            others = np.maximum(others, box_iou(last[b:b + 1], boxes)[0])
-        return recent[b] if score[b] >= others.max() else None
+        open_box = np.all(np.isfinite(boxes), axis=1)
+        free = open_box[:, None] & (np.array(classes)[:, None] == np.array([tr.cls for tr in recent])[None])
+        iou_moved, iou_last = np.zeros(free.shape), np.zeros(free.shape)
+        for k in np.flatnonzero(open_box):
+            iou_moved[k], iou_last[k] = self._join_overlap(boxes[k], moved), self._join_overlap(boxes[k], last)
 
-    def _join_by_gate(self, frame: Frame, recent: list[ObjectTrack], pred: dict[int, np.ndarray], moved: np.ndarray,
-                      iou_moved: np.ndarray, box: np.ndarray, boxes: np.ndarray) -> ObjectTrack | None:
-        """The velocity-known track among `recent` whose predicted box (`moved`) overlaps `box` (`iou_moved` > 0)
-        and is nearest to it within box_gate_chi2 (`_gate_distance`), when `box` is also the nearest to it of the
-        instances that can still join (`boxes`). The overlap bounds the gate where the projected covariance is
-        large (a car passing the camera, a box clipped to the image border)."""
-        cfg = self.cfg
-        if not (cfg.box_gate_chi2 > 0 and cfg.filter):
-            return None
-        candidates = np.vstack([box[None], boxes])  # row 0: `box`; then the instances that can still join
-        d2 = [self._gate_distance(frame, tr, pred[tr.track_id], mb, candidates)
-              if tr.velocity_known and tr.state_mean is not None and overlap > 0 else None
-              for tr, mb, overlap in zip(recent, moved, iou_moved)]
-        b = int(np.argmin([np.inf if d is None else d[0] for d in d2]))
-        if d2[b] is None or not d2[b][0] <= cfg.box_gate_chi2:
-            return None
-        return recent[b] if d2[b][0] <= d2[b][1:].min() else None
+        def take(cost: np.ndarray, ok: np.ndarray) -> None:
+            for k, t in _hungarian(cost, free & ok):
+                joined[k] = recent[t]
+                free[k, :] = False
+                free[:, t] = False
+
+        for iou in (iou_moved, np.maximum(iou_moved, iou_last)):
+            take(-iou, iou >= cfg.join_iou)
+        if gate and cfg.box_gate_chi2 > 0 and cfg.filter and free.any():
+            d2 = np.full(free.shape, np.inf)
+            for t in np.flatnonzero(free.any(axis=0)):
+                tr, rows = recent[t], free[:, t] & (iou_moved[:, t] > 0)
+                if tr.velocity_known and tr.state_mean is not None and rows.any():
+                    d2[rows, t] = self._gate_distance(frame, tr, pred[tr.track_id], moved[t], boxes[rows])
+            take(d2, d2 <= cfg.box_gate_chi2)
+        return joined
 
     def _gate_distance(self, frame: Frame, track: ObjectTrack, T_w_o_pred: np.ndarray, moved: np.ndarray,
                        boxes: np.ndarray) -> np.ndarray:

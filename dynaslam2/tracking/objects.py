@@ -14,7 +14,7 @@ Unclaimed instances with enough close keypoints with depth become objects, unles
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
-association; failing that, their box centre lies within the Mahalanobis gate of a velocity-known
+association, the frame's instances assigned jointly; failing that, their box centre lies within the Mahalanobis gate of a velocity-known
 object's predicted box, `objects.box_gate_chi2`; both in `box_association`). Then instances with
 too few close keypoints keep, by their box alone, a track seen within `objects.coast_max_s`
 (coasting: its id kept, its predicted pose not reported). A tentative track (fewer than
@@ -41,6 +41,11 @@ from dynaslam2.tracking.box_association import BoxAssociation, instance_boxes, k
 from dynaslam2.tracking.object_filter import capped_angular_velocity, filter_position, filter_rotation, gated
 
 DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
+
+
+def _instance_class(inst: int) -> str:
+    """The class name of instance id `inst` (class id x INSTANCE_CLASS_FACTOR + instance number)."""
+    return CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
 
 
 @dataclass
@@ -267,24 +272,42 @@ class ObjectTracker:
                     proposals[other] = self._propose(frame, objects, objects.tracks[other], pred[other],
                                                      *candidates[other], free, claimed)
         # Unclaimed instances: re-appearing objects or new ones, first those with enough close keypoints, then
-        # (coast_max_s) the others. The box join's mutual-best test counts the instances of the same pass that can
-        # still join a track, so that a mostly hidden neighbour cannot outbid an object seen whole.
+        # (coast_max_s) the others. In each pass the point votes go first; the instances left are assigned to the
+        # unseen tracks jointly by their boxes (`BoxAssociation.assign`), so that a mostly hidden neighbour cannot
+        # outbid an object seen whole; the rest become new objects.
         # (Each instance's points once: an instance only takes its own keypoints out of `free`.)
         open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
         points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
         enough = {k: len(points[k][0]) >= cfg.min_inliers for k in open_k}
         for with_enough in ([True, False] if cfg.coast_max_s > 0 else [True]):
-            can_join = np.zeros(len(inst_ids), dtype=bool)
-            can_join[[k for k in open_k if enough[k] == with_enough and inst_ids[k] not in claimed]] = True
-            for k in np.flatnonzero(can_join).tolist():
+            ks = [k for k in open_k if enough[k] == with_enough and inst_ids[k] not in claimed]
+            voted = {}
+            for k in ks:
                 inst = int(inst_ids[k])
-                cls = CLASS_NAMES[inst // INSTANCE_CLASS_FACTOR]
-                unseen = [tr for tr in active if tr.track_id not in seen and tr.cls == cls]
-                tid = self._new_object(frame, objects, unseen, pred, inst, points[k], boxes[k], boxes[can_join], free)
+                tid, voted[k] = self._join_by_vote(frame, objects, self._unseen(active, seen, inst), pred, inst,
+                                                   points[k], boxes[k], free)
                 if tid is not None:
                     seen.append(tid)
                     claimed.add(inst)
-                    can_join[k] = False
+            ks = [k for k in ks if inst_ids[k] not in claimed]
+            joined = self.boxes.assign(frame, objects, [tr for tr in active if tr.track_id not in seen], pred,
+                                       boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
+                                       cfg.join_max_gap_s if with_enough else cfg.coast_max_s, with_enough)
+            by_box = {tr.track_id for tr in joined if tr is not None}
+            for k, tr in zip(ks, joined):
+                inst = int(inst_ids[k])
+                # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join
+                # when the instance's box touches the voted track's (`BoxAssociation.touches`), e.g. after the box
+                # join's window lapsed.
+                vote = voted[k][0] if voted[k] is not None else None
+                if (tr is None and vote is not None and vote.track_id not in seen and vote.track_id not in by_box
+                        and self.boxes.touches(frame, objects, vote, pred[vote.track_id], boxes[k])):
+                    tr = vote
+                tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free)
+                       if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
+                if tid is not None:
+                    seen.append(tid)
+                    claimed.add(inst)
         self._cull(objects, seen)
         for tr in active:  # tentative and unmatched: deleted (DeepSORT)
             if tr.track_id not in seen and len(tr.observations) < cfg.min_output_observations:
@@ -427,57 +450,59 @@ class ObjectTracker:
         info = np.einsum("n,nki,nkj->ij", self.inv_level_sigma2[frame.keypoints.octave[kp]], J6, J6)
         return info[:3, :3], np.linalg.inv(info + 1e-9 * np.eye(6))[3:, 3:]
 
-    def _new_object(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
-                    inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, boxes: np.ndarray,
-                    free: np.ndarray) -> int | None:
-        """An unclaimed instance (`points`: its `_instance_points`): joins an unseen track (point votes with >=
-        min_inliers close keypoints for a track predicted in view (`_in_view`), then box IoU with a track observed
-        within join_max_gap_s (or its Mahalanobis gate; `BoxAssociation.join`), or within coast_max_s by IoU alone
-        when the instance has fewer close keypoints: no points then, then the voted track whose pose failed when the
-        instance's box touches its box) or, with >= min_new_points close keypoints (or, on a small instance, >=
-        min_inliers that are >= small_new_fraction of its keypoints), creates an object at the centroid of its points
-        with identity rotation (III-B)."""
+    @staticmethod
+    def _unseen(active: list[ObjectTrack], seen: list[int], inst: int) -> list[ObjectTrack]:
+        """The active tracks of instance `inst`'s class not seen in this frame."""
+        return [tr for tr in active if tr.track_id not in seen and tr.cls == _instance_class(inst)]
+
+    def _join_by_vote(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
+                      inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray
+                      ) -> tuple[int | None, tuple[ObjectTrack, np.ndarray, np.ndarray] | None]:
+        """An unclaimed instance (`points`: its `_instance_points`) with >= min_inliers close keypoints whose
+        keypoints mostly match the points of one unseen track predicted in view (`_vote`, `_in_view`) joins it
+        when a pose fits the matches (`_join_by_points`): (the track id or None, the vote or None)."""
+        kp, X_w, _ = points
+        if not unseen or len(kp) < self.cfg.min_inliers:
+            return None, None
+        voted = self._vote(frame, objects, unseen, kp)
+        if voted is None or not self._in_view(frame, objects, voted[0], pred[voted[0].track_id]):
+            return None, None
+        return self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted), voted
+
+    def _box_join(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, inst: int,
+                  points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray) -> int:
+        """The instance joins `track` by its box (`BoxAssociation.assign`): the track goes on at its
+        constant-velocity prediction, translated by the registration on the keypoints that match its points
+        (`_register`; a measurement of its position for the filter, with the registration's information); the
+        instance's other close keypoints become its points. Without a registration the observation is the
+        prediction; a prediction that has run off (its points would land far from the track's) is re-anchored on
+        the instance first (`_reanchor`). An instance with fewer than min_inliers close keypoints (coasting) adds
+        no points."""
+        kp, X_w, _ = points
+        if len(kp) < self.cfg.min_inliers:
+            kp, X_w = kp[:0], X_w[:0]
+        T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
+        if not len(kp_in) and len(kp):
+            T_w_o = self._reanchor(objects, track, T_w_o, X_w)
+        rest = ~np.isin(kp, kp_in)
+        new = objects.add_points(track.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
+                                 frame.keypoints.desc[kp[rest]], self._depth_weight(frame, kp[rest]))
+        self._observe(frame, objects, track, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box,
+                      measured=info is not None, position_info=info)
+        free[kp] = False
+        return track.track_id
+
+    def _create(self, frame: Frame, objects: ObjectMap, inst: int, points: tuple[np.ndarray, np.ndarray, int],
+                box: np.ndarray, free: np.ndarray) -> int | None:
+        """With >= min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
+        small_new_fraction of its keypoints), the instance creates an object at the centroid of its points with
+        identity rotation (III-B); else None."""
         cfg = self.cfg
         kp, X_w, n_instance = points
         enough = len(kp) >= cfg.min_inliers
-        # Track ids from point votes: most matched keypoints belong to one map object.
-        voted = self._vote(frame, objects, unseen, kp) if unseen and enough else None
-        if voted is not None and not self._in_view(frame, objects, voted[0], pred[voted[0].track_id]):
-            voted = None
-        if voted is not None:
-            tid = self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted)
-            if tid is not None:
-                return tid
-        # Instance-to-instance: box IoU with the predicted box of a recently measured track. The track
-        # goes on at its constant-velocity prediction, translated by the registration on the keypoints that
-        # match its points (`_register`; a measurement of its position for the filter, with the registration's
-        # information); the instance's other close keypoints become its points. Without a registration the
-        # observation is the prediction; a prediction that has run off (its points would land far from the
-        # track's) is re-anchored on the instance first (`_reanchor`).
-        # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join when
-        # the instance's box touches the voted track's (`BoxAssociation.touches`), e.g. after the box join's window
-        # lapsed.
-        tr = self.boxes.join(frame, objects, unseen, pred, box, boxes,
-                             cfg.join_max_gap_s if enough else cfg.coast_max_s, enough)
-        if (tr is None and voted is not None
-                and self.boxes.touches(frame, objects, voted[0], pred[voted[0].track_id], box)):
-            tr = voted[0]
-        if tr is not None:
-            if not enough:
-                kp, X_w = kp[:0], X_w[:0]
-            T_w_o, kp_in, pt_in, info = self._register(frame, objects, tr, pred[tr.track_id], kp, X_w)
-            if not len(kp_in) and len(kp):
-                T_w_o = self._reanchor(objects, tr, T_w_o, X_w)
-            rest = ~np.isin(kp, kp_in)
-            new = objects.add_points(tr.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
-                                     frame.keypoints.desc[kp[rest]], self._depth_weight(frame, kp[rest]))
-            self._observe(frame, objects, tr, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box,
-                          measured=info is not None, position_info=info)
-            free[kp] = False
-            return tr.track_id
         if len(kp) < cfg.min_new_points and not (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
             return None
-        tr = objects.new_track(CLASS_NAMES[int(inst) // 1000])
+        tr = objects.new_track(_instance_class(inst))
         centroid = X_w.mean(axis=0)
         new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
         self._observe(frame, objects, tr, make_pose(np.eye(3), centroid), kp, new, inst, box)
