@@ -299,7 +299,7 @@ class ObjectTracker:
                 # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join
                 # when the instance's box touches the voted track's (`BoxAssociation.touches`), e.g. after the box
                 # join's window lapsed.
-                vote = voted[k][0] if voted[k] is not None else None
+                vote = voted[k]
                 if (tr is None and vote is not None and vote.track_id not in seen and vote.track_id not in by_box
                         and self.boxes.touches(frame, objects, vote, pred[vote.track_id], boxes[k])):
                     tr = vote
@@ -457,17 +457,17 @@ class ObjectTracker:
 
     def _join_by_vote(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                       inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray
-                      ) -> tuple[int | None, tuple[ObjectTrack, np.ndarray, np.ndarray] | None]:
+                      ) -> tuple[int | None, ObjectTrack | None]:
         """An unclaimed instance (`points`: its `_instance_points`) with >= min_inliers close keypoints whose
         keypoints mostly match the points of one unseen track predicted in view (`_vote`, `_in_view`) joins it
-        when a pose fits the matches (`_join_by_points`): (the track id or None, the vote or None)."""
+        when a pose fits the matches (`_join_by_points`): (the track id or None, the voted track or None)."""
         kp, X_w, _ = points
         if not unseen or len(kp) < self.cfg.min_inliers:
             return None, None
         voted = self._vote(frame, objects, unseen, kp)
         if voted is None or not self._in_view(frame, objects, voted[0], pred[voted[0].track_id]):
             return None, None
-        return self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted), voted
+        return self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted), voted[0]
 
     def _box_join(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, inst: int,
                   points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray) -> int:
