@@ -1089,3 +1089,33 @@ def test_hungarian_takes_as_many_allowed_pairs_as_it_can():
     assert sorted(_hungarian(cost, ok)) == [(0, 1), (1, 0)]
     assert _hungarian(cost, np.zeros_like(ok)) == []
     assert _hungarian(cost[:, :1], ok[:, :1]) == [(0, 0)]
+
+
+@pytest.mark.parametrize("gate_chi2", [0.0, 5.991])
+def test_box_gate_keeps_a_young_pedestrian_track_without_a_velocity(gate_chi2):
+    """A pedestrian 18 m away walking across at 1 m/s is seen once, box-joined once with a new appearance (no point
+    matches: no measured velocity, its prediction stands still), hidden for 0.2 s and back, new in appearance
+    again, 0.4 m on: its last box barely overlaps its instance's (IoU < join_iou) and no velocity gives a moved box,
+    but its filter, started from the pedestrian speed prior, puts the instance within its gate, so it keeps its id
+    (the `young` stage; crossing s10 gt25: a group's pedestrian hidden before its young track had a velocity).
+    Without the gate it starts a new track. A second pedestrian 1.5 m further on does not take the track."""
+    rng = np.random.default_rng(43)
+    ped = Body(rng, 2001, 60, (0.45, 1.7, 0.4))
+    T_ped = [make_pose(np.eye(3), np.array([-3.0 + 0.1 * i, 0.3, 18.0])) for i in range(5)]
+    objects, trk = ObjectMap(), tracker(f"objects.box_gate_chi2={gate_chi2}")
+    (e,) = trk.track(make_frame(0, [(ped, T_ped[0])]), None, objects).estimates
+    ped.desc = rng.integers(0, 256, ped.desc.shape).astype(np.uint8)
+    (e1,) = trk.track(make_frame(1, [(ped, T_ped[0])]), None, objects).estimates
+    tr = objects.tracks[e.track_id]
+    assert e1.track_id == e.track_id and not tr.velocity_known
+    trk.track(make_frame(2, []), None, objects)
+    trk.track(make_frame(3, []), None, objects)
+    ped.inst, ped.desc = 2002, rng.integers(0, 256, ped.desc.shape).astype(np.uint8)
+    other = Body(rng, 2003, 60, (0.45, 1.7, 0.4))
+    T_back = T_ped[4]
+    frame = make_frame(4, [(ped, T_back), (other, T_back @ make_pose(np.eye(3), np.array([1.5, 0.0, 0.0])))])
+    inst_boxes = keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), np.array([2002, 2003]))
+    assert 0 < box_iou(np.array(tr.last.box2d)[None], inst_boxes)[0, 0] < trk.cfg.join_iou
+    estimates = trk.track(frame, None, objects).estimates
+    assert (e.track_id in {x.track_id for x in estimates}) == (gate_chi2 > 0)
+    assert all(x.instance_id == 2002 for x in estimates if x.track_id == e.track_id)

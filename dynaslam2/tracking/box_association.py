@@ -3,7 +3,7 @@ seen object of its class continues that object's track), with SORT's motion-comp
 the object's predicted motion, `predicted_box`, or by its image velocity, `image_extrapolated_box`), SORT's max_age
 (the join window counts from the track's newest observation), the frame's instances assigned to the tracks jointly
 (SORT's Hungarian assignment), and, where no box overlaps enough, DeepSORT's Mahalanobis gate on the box centre
-(`objects.box_gate_chi2`)."""
+(`objects.box_gate_chi2`), last for the young pedestrian tracks that have no velocity yet."""
 
 from __future__ import annotations
 
@@ -137,24 +137,32 @@ class BoxAssociation:
         return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
 
     def assign(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
-               boxes: np.ndarray, classes: list[str], max_gap_s: float, gate: bool) -> list[ObjectTrack | None]:
+               boxes: np.ndarray, classes: list[str], max_gap_s: float,
+               stages: tuple[str, ...]) -> list[ObjectTrack | None]:
         """The track each instance box of `boxes` (class `classes`) joins, or None: a joint assignment of the boxes
         to the `tracks` of their class observed within `max_gap_s` (measured or box-joined: SORT's max_age counts
         from the newest matched detection) whose predicted box is not passed behind the camera (instance-to-instance
-        association, III-B). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's cascade, each stage over the
-        boxes and tracks the earlier ones left: (1) by the overlap of each track's last box moved by its predicted
-        image motion (`predicted_box`; `_join_overlap` >= join_iou), so that the last box of an object that has
-        left where this one is now cannot take it; (2) by that or the overlap of its last box (`_last_box`: a wrong
-        velocity, or a near object whose origin projects off its visible part, moves the box wrong); (3) with `gate`,
-        by the Mahalanobis distance (`_gate_distance` <= box_gate_chi2) to a velocity-known track whose moved box
-        overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a car passing
-        the camera, a box clipped to the image border)."""
+        association, III-B). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's cascade of `stages`, each over
+        the boxes and tracks the earlier ones left:
+        "moved": by the overlap of each track's last box moved by its predicted image motion (`predicted_box`;
+        `_join_overlap` >= join_iou), so that the last box of an object that has left where this one is now cannot
+        take it;
+        "box": by that or the overlap of its last box (`_last_box`: a wrong velocity, or a near object whose origin
+        projects off its visible part, moves the box wrong);
+        "gate": by the Mahalanobis distance (`_gate_distance` <= box_gate_chi2) to a velocity-known track whose
+        moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
+        car passing the camera, a box clipped to the image border);
+        "young": likewise to a pedestrian track without a velocity (its 3D prediction stands still; its filter
+        starts from the class's speed prior, objects.pedestrian_initial_speed_sigma) whose `_last_box` overlaps
+        the instance's."""
         cfg = self.cfg
         joined: list[ObjectTrack | None] = [None] * len(boxes)
+        if not len(boxes):
+            return joined
         recent = [tr for tr in tracks if frame.timestamp - tr.last.timestamp <= max_gap_s]
         moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects) for tr in recent]
         recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
-        if not recent or not len(boxes):
+        if not recent:
             return joined
         moved = np.array(moved)
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
@@ -163,22 +171,28 @@ class BoxAssociation:
         iou_moved, iou_last = np.zeros(free.shape), np.zeros(free.shape)
         for k in np.flatnonzero(open_box):
             iou_moved[k], iou_last[k] = self._join_overlap(boxes[k], moved), self._join_overlap(boxes[k], last)
-
-        def take(cost: np.ndarray, ok: np.ndarray) -> None:
+        for stage in stages:
+            if stage in ("moved", "box"):
+                iou = iou_moved if stage == "moved" else np.maximum(iou_moved, iou_last)
+                cost, ok = -iou, iou >= cfg.join_iou
+            elif stage not in ("gate", "young"):
+                raise ValueError(f"unknown box association stage {stage!r}")
+            elif cfg.box_gate_chi2 > 0 and cfg.filter:
+                young = stage == "young"
+                track_box, overlap = (last, iou_last) if young else (moved, iou_moved)
+                cost = np.full(free.shape, np.inf)
+                for t in np.flatnonzero(free.any(axis=0)):
+                    tr, rows = recent[t], free[:, t] & (overlap[:, t] > 0)
+                    if rows.any() and tr.state_mean is not None and (
+                            not tr.velocity_known and tr.cls == "pedestrian" if young else tr.velocity_known):
+                        cost[rows, t] = self._gate_distance(frame, tr, pred[tr.track_id], track_box[t], boxes[rows])
+                ok = cost <= cfg.box_gate_chi2
+            else:
+                continue
             for k, t in _hungarian(cost, free & ok):
                 joined[k] = recent[t]
                 free[k, :] = False
                 free[:, t] = False
-
-        for iou in (iou_moved, np.maximum(iou_moved, iou_last)):
-            take(-iou, iou >= cfg.join_iou)
-        if gate and cfg.box_gate_chi2 > 0 and cfg.filter and free.any():
-            d2 = np.full(free.shape, np.inf)
-            for t in np.flatnonzero(free.any(axis=0)):
-                tr, rows = recent[t], free[:, t] & (iou_moved[:, t] > 0)
-                if tr.velocity_known and tr.state_mean is not None and rows.any():
-                    d2[rows, t] = self._gate_distance(frame, tr, pred[tr.track_id], moved[t], boxes[rows])
-            take(d2, d2 <= cfg.box_gate_chi2)
         return joined
 
     def _gate_distance(self, frame: Frame, track: ObjectTrack, T_w_o_pred: np.ndarray, moved: np.ndarray,

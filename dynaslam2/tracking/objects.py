@@ -14,11 +14,13 @@ Unclaimed instances with enough close keypoints with depth become objects, unles
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
-association, the frame's instances assigned jointly; failing that, their box centre lies within the Mahalanobis gate of a velocity-known
-object's predicted box, `objects.box_gate_chi2`; both in `box_association`). Then instances with
-too few close keypoints keep, by their box alone, a track seen within `objects.coast_max_s`
-(coasting: its id kept, its predicted pose not reported). A tentative track (fewer than
-`objects.min_output_observations` observations) that finds nothing in a frame is deleted.
+association, the frame's instances assigned jointly; failing that, their box centre lies within the
+Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_chi2`; both in
+`box_association`). Then instances with too few close keypoints keep, by their box alone, a track
+seen within `objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). Last, an
+instance still unclaimed joins a young pedestrian track (no velocity yet) within the gate of its
+last box. A tentative track (fewer than `objects.min_output_observations` observations) that finds
+nothing in a frame is deleted.
 """
 
 from __future__ import annotations
@@ -274,11 +276,12 @@ class ObjectTracker:
         # Unclaimed instances: re-appearing objects or new ones, first those with enough close keypoints, then
         # (coast_max_s) the others. In each pass the point votes go first; the instances left are assigned to the
         # unseen tracks jointly by their boxes (`BoxAssociation.assign`), so that a mostly hidden neighbour cannot
-        # outbid an object seen whole; the rest become new objects.
+        # outbid an object seen whole.
         # (Each instance's points once: an instance only takes its own keypoints out of `free`.)
         open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
         points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
         enough = {k: len(points[k][0]) >= cfg.min_inliers for k in open_k}
+        held = []  # instances that joined no track in their pass
         for with_enough in ([True, False] if cfg.coast_max_s > 0 else [True]):
             ks = [k for k in open_k if enough[k] == with_enough and inst_ids[k] not in claimed]
             voted = {}
@@ -292,7 +295,8 @@ class ObjectTracker:
             ks = [k for k in ks if inst_ids[k] not in claimed]
             joined = self.boxes.assign(frame, objects, [tr for tr in active if tr.track_id not in seen], pred,
                                        boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
-                                       cfg.join_max_gap_s if with_enough else cfg.coast_max_s, with_enough)
+                                       cfg.join_max_gap_s if with_enough else cfg.coast_max_s,
+                                       ("moved", "box", "gate") if with_enough else ("moved", "box"))
             by_box = {tr.track_id for tr in joined if tr is not None}
             for k, tr in zip(ks, joined):
                 inst = int(inst_ids[k])
@@ -303,11 +307,25 @@ class ObjectTracker:
                 if (tr is None and vote is not None and vote.track_id not in seen and vote.track_id not in by_box
                         and self.boxes.touches(frame, objects, vote, pred[vote.track_id], boxes[k])):
                     tr = vote
-                tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free)
-                       if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
-                if tid is not None:
-                    seen.append(tid)
+                if tr is not None:
+                    seen.append(self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free))
                     claimed.add(inst)
+                else:
+                    held.append(k)
+        # Last, the young pedestrian tracks without a velocity, by their gate (a group's pedestrian hidden before its
+        # track had one, crossing s10); then the instances left become new objects.
+        gated = [k for k in held if enough[k]]
+        unseen = [tr for tr in active if tr.track_id not in seen]
+        young = dict(zip(gated, self.boxes.assign(frame, objects, unseen, pred, boxes[gated],
+                                                  [_instance_class(int(inst_ids[k])) for k in gated],
+                                                  cfg.join_max_gap_s, ("young",))))
+        for k in held:
+            inst, tr = int(inst_ids[k]), young.get(k)
+            tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free)
+                   if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
+            if tid is not None:
+                seen.append(tid)
+                claimed.add(inst)
         self._cull(objects, seen)
         for tr in active:  # tentative and unmatched: deleted (DeepSORT)
             if tr.track_id not in seen and len(tr.observations) < cfg.min_output_observations:
