@@ -19,7 +19,6 @@ from dynaslam2.map.objects import ObjectMap, ObjectTrack
 from dynaslam2.tracking.object_filter import predict_state
 
 
-
 def _hungarian(cost: np.ndarray, ok: np.ndarray) -> list[tuple[int, int]]:
     """The (row, column) pairs of the minimum-`cost` assignment among the allowed pairs `ok` that takes as many of
     them as it can (a forbidden pair costs more than any allowed assignment; SORT's Hungarian assignment)."""
