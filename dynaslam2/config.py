@@ -667,18 +667,18 @@ class ObjectsConfig:
     accel_sigma: float = 1.5
     position_floor_m: float = 0.05
     initial_speed_sigma: float = 10.0
-    # A new pedestrian track's velocity prior instead (m/s per axis; people walk at ~1.4 m/s): with 10 m/s the
-    # first two positions of a young pedestrian track (noisy at 15-25 m, a partly hidden body's visible part
-    # shifting) set its velocity (a standing one at 20 m with 0.1 m of noise: 2.5 m/s rms, 0.74 with 1 m/s). Sets (seeds 0-4 / 5-9 / following 10-19 /
-    # traffic, crossing, static 10-14; with `first_claim`'s tie rule), 10 -> 1.0: object ATE 0.239 / 0.176 / 0.190
-    # / 0.202 -> 0.228 / 0.172 / 0.164 / 0.193 m, id switches 10 / 3 / 0 / 9 -> 8 / 3 / 0 / 7 (none unoccluded),
-    # short occlusions kept 34/34, 25/25, 2/2, 50/53 -> 34/34, 25/25, 2/2, 52/53, paper selection 0.076 / 0.085 /
-    # 0.076 / 0.080 -> 0.080 / 0.086 / 0.075 / 0.080 m, ego 0.0218 / 0.0269 / 0.0262 / 0.0245 -> 0.0223 / 0.0268 /
-    # 0.0261 / 0.0250 m (within the chaotic spread); fresh following seeds 20-39 0.197 -> 0.184 m. The prior as the
-    # stationary law of a pedestrian velocity reverting to rest (an integrated Ornstein-Uhlenbeck velocity,
-    # Singer's model, with accel_sigma's driving noise at 10 Hz: tau 8 s) gave about the same (0.229 / 0.170 /
-    # 0.163 / 0.190 m, 11 / 4 / 0 / 6 switches, 51/52 kept on 10-14); with tau 2 s (4x the noise, without the tie
-    # rule) 0.231 / - / - / 0.195 m and 12 / - / - / 13 switches, 2 unoccluded.
+    # A new pedestrian track's velocity prior instead (m/s per axis; people walk at ~1.4 m/s): with 10 m/s the first
+    # two positions of a young pedestrian track (noisy at 15-25 m, a partly hidden body's visible part shifting) set
+    # its velocity (a standing one at 20 m with 0.1 m of noise: 2.5 m/s rms, 0.74 with 1 m/s). Sets (seeds 0-4 / 5-9
+    # / following 10-19 / traffic, crossing, static 10-14; with `first_claim`'s tie rule), 10 -> 1.0: object ATE
+    # 0.239 / 0.176 / 0.190 / 0.202 -> 0.228 / 0.172 / 0.164 / 0.193 m, id switches 10 / 3 / 0 / 9 -> 8 / 3 / 0 / 7
+    # (none unoccluded), short occlusions kept 34/34, 25/25, 2/2, 50/53 -> 34/34, 25/25, 2/2, 52/53, paper selection
+    # 0.076 / 0.085 / 0.076 / 0.080 -> 0.080 / 0.086 / 0.075 / 0.080 m, ego 0.0218 / 0.0269 / 0.0262 / 0.0245 ->
+    # 0.0223 / 0.0268 / 0.0261 / 0.0250 m (within the chaotic spread); fresh following seeds 20-39 0.197 -> 0.184 m.
+    # The prior as the stationary law of a pedestrian velocity reverting to rest (an integrated Ornstein-Uhlenbeck
+    # velocity, Singer's model, with accel_sigma's driving noise at 10 Hz: tau 8 s) gave about the same (0.229 /
+    # 0.170 / 0.163 / 0.190 m, 11 / 4 / 0 / 6 switches, 51/52 kept on 10-14); with tau 2 s (4x the noise, without
+    # the tie rule) 0.231 / - / - / 0.195 m and 12 / - / - / 13 switches, 2 unoccluded.
     pedestrian_initial_speed_sigma: float = 1.0
     # Not in the paper, with `filter`: a constant-angular-velocity filter of each object's rotation (white
     # angular acceleration angular_accel_sigma rad/s^2; pose-only rotation covariance from its stereo Jacobian,

@@ -16,7 +16,7 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import transform
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectTrack
-from dynaslam2.tracking.object_filter import predict_state
+from dynaslam2.tracking.object_filter import initial_speed_sigma, predict_state
 
 
 def _hungarian(cost: np.ndarray, ok: np.ndarray) -> list[tuple[int, int]]:
@@ -151,9 +151,9 @@ class BoxAssociation:
         "gate": by the Mahalanobis distance (`_gate_distance` <= box_gate_chi2) to a velocity-known track whose
         moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
         car passing the camera, a box clipped to the image border);
-        "young": likewise to a pedestrian track without a velocity (its 3D prediction stands still; its filter
-        starts from the class's speed prior, objects.pedestrian_initial_speed_sigma) whose `_last_box` overlaps
-        the instance's."""
+        "young": likewise to a track without a velocity (its 3D prediction stands still) whose `_last_box` overlaps
+        the instance's, when its class has a speed prior tighter than initial_speed_sigma (`initial_speed_sigma`:
+        pedestrians) for its filter to start from."""
         cfg = self.cfg
         joined: list[ObjectTrack | None] = [None] * len(boxes)
         if not len(boxes):
@@ -183,7 +183,8 @@ class BoxAssociation:
                 for t in np.flatnonzero(free.any(axis=0)):
                     tr, rows = recent[t], free[:, t] & (overlap[:, t] > 0)
                     if rows.any() and tr.state_mean is not None and (
-                            not tr.velocity_known and tr.cls == "pedestrian" if young else tr.velocity_known):
+                            not tr.velocity_known and initial_speed_sigma(tr.cls, cfg) < cfg.initial_speed_sigma
+                            if young else tr.velocity_known):
                         cost[rows, t] = self._gate_distance(frame, tr, pred[tr.track_id], track_box[t], boxes[rows])
                 ok = cost <= cfg.box_gate_chi2
             else:

@@ -33,6 +33,12 @@ def predict_state(track: ObjectTrack, dt: float, cfg: ObjectsConfig) -> tuple[np
     return F @ track.state_mean, F @ track.state_cov @ F.T + white_acceleration_noise(cfg.accel_sigma, dt)
 
 
+def initial_speed_sigma(cls: str, cfg: ObjectsConfig) -> float:
+    """The velocity prior (m/s per axis) of a new track of class `cls`: pedestrian_initial_speed_sigma for a
+    pedestrian, initial_speed_sigma for any other class."""
+    return cfg.pedestrian_initial_speed_sigma if cls == "pedestrian" else cfg.initial_speed_sigma
+
+
 def position_noise(info: np.ndarray, cfg: ObjectsConfig) -> np.ndarray:
     """(3, 3) covariance of a pose-only object position of information `info`, with the floor."""
     I3 = np.eye(3)
@@ -50,8 +56,8 @@ def filter_position(track: ObjectTrack, dt: float, p_meas: np.ndarray, info: np.
     if track.state_mean is None:
         track.state_mean = np.r_[p_meas, np.zeros(3)]
         R0 = R if info is not None else cfg.position_floor_m**2 * I3
-        speed_sigma = cfg.pedestrian_initial_speed_sigma if track.cls == "pedestrian" else cfg.initial_speed_sigma
-        track.state_cov = np.block([[R0, np.zeros((3, 3))], [np.zeros((3, 3)), speed_sigma**2 * I3]])
+        track.state_cov = np.block([[R0, np.zeros((3, 3))],
+                                    [np.zeros((3, 3)), initial_speed_sigma(track.cls, cfg)**2 * I3]])
         return track.state_mean[:3].copy(), track.state_mean[3:].copy()
     m, P = predict_state(track, dt, cfg)
     if info is not None:
