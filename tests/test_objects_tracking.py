@@ -636,6 +636,29 @@ def test_box_association_joins_an_object_emerging_around_its_last_box(contain):
     assert (e3.track_id == e.track_id) == (contain > 0)
 
 
+@pytest.mark.parametrize("contain", [0.8, 0.0])
+def test_box_association_joins_a_partly_hidden_object_inside_its_predicted_box(contain):
+    """Crossing s38 f111: a pedestrian seen whole walks behind a low occluder and only its head and shoulders stay in
+    view, with a new appearance: the instance's box lies inside the track's box with an IoU of ~0.25 (< join_iou),
+    and it keeps its id only by the containment test, here of the instance's box inside the track's
+    (objects.join_contain; the Mahalanobis gate off)."""
+    rng = np.random.default_rng(23)
+    person = Body(rng, 2001, 160, (0.6, 1.8, 0.4))
+    T_person = make_pose(np.eye(3), np.array([0.5, 0.3, 8.0]))
+    objects, trk = ObjectMap(), tracker(f"objects.join_contain={contain}", "objects.box_gate_chi2=0")
+    e = track_alone(trk, objects, person, [T_person] * 3)
+    top = Body(rng, 2001, 0, (1.0, 1.0, 1.0))
+    visible = person.X_b[:, 1] < -0.45  # the top quarter (camera y points down)
+    top.X_b = person.X_b[visible]
+    top.desc = rng.integers(0, 256, (len(top.X_b), 32)).astype(np.uint8)
+    frame = make_frame(3, [(top, T_person)])
+    iou = box_iou(np.array([objects.tracks[e.track_id].last.box2d]), keypoint_boxes(
+        frame, np.ones(len(frame.keypoints), bool), np.array([2001])))[0, 0]
+    assert 0.5 * trk.cfg.join_iou <= iou < trk.cfg.join_iou
+    (e3,) = trk.track(frame, None, objects).estimates
+    assert (e3.track_id == e.track_id) == (contain > 0)
+
+
 def camera_at(z: float) -> np.ndarray:
     """T_c_w of a camera driven `z` m along the world's +z axis."""
     return make_pose(np.eye(3), np.array([0.0, 0.0, -float(z)]))

@@ -220,12 +220,13 @@ class BoxAssociation:
         return np.asarray(track.last.box2d if moving is None else moving, dtype=float)
 
     def _join_overlap(self, box: np.ndarray, track_boxes: np.ndarray) -> np.ndarray:
-        """IoU of the instance's `box` with each of `track_boxes`, raised to join_iou for a track box that lies >=
-        join_contain inside `box` with an IoU of >= join_iou / 2 (an object emerging from behind an occluder: its
-        box grows around the partly visible last one)."""
+        """IoU of the instance's `box` with each of `track_boxes`, raised to join_iou where one of the two boxes lies
+        >= join_contain inside the other with an IoU of >= join_iou / 2: an object emerging from behind an occluder
+        (its box grows around the partly visible last one) or going behind one (its box shrinks inside it)."""
         cfg = self.cfg
         iou = box_iou(box[None], track_boxes)[0]
         if not cfg.join_contain:
             return iou
-        inside = box_covered(box[None], track_boxes)[0] >= cfg.join_contain
+        covered = np.maximum(box_covered(box[None], track_boxes)[0], box_covered(track_boxes, box[None])[:, 0])
+        inside = covered >= cfg.join_contain
         return np.where(inside & (iou >= 0.5 * cfg.join_iou), np.maximum(iou, cfg.join_iou), iou)
