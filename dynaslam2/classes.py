@@ -5,6 +5,7 @@ CLASS_NAMES = {v: k for k, v in CLASS_IDS.items()}
 KITTI_TYPES = {"car": "Car", "pedestrian": "Pedestrian", "van": "Van", "truck": "Truck", "cyclist": "Cyclist"}
 FROM_KITTI_TYPE = {v: k for k, v in KITTI_TYPES.items()}
 DYNAMIC_CLASSES = frozenset(CLASS_IDS)
+VEHICLE_CLASSES = frozenset({"car", "van", "truck"})
 INSTANCE_IGNORE = 10000
 INSTANCE_CLASS_FACTOR = 1000
 

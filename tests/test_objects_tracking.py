@@ -1062,7 +1062,7 @@ def test_box_gate_keeps_a_pedestrian_that_reappears_beside_its_predicted_box(gat
     rng = np.random.default_rng(31)
     ped = Body(rng, 2001, 60, (0.45, 1.7, 0.4))
     T_ped = [make_pose(np.eye(3), np.array([-3.0 + 0.1 * i, 0.3, 18.0])) for i in range(5)]
-    objects, trk = ObjectMap(), tracker(f"objects.box_gate_chi2={gate_chi2}")
+    objects, trk = ObjectMap(), tracker(f"objects.box_gate_chi2={gate_chi2}", "objects.extent_min_fraction=0")
     e = track_alone(trk, objects, ped, T_ped)
     ped.inst, ped.desc = 2002, rng.integers(0, 256, ped.desc.shape).astype(np.uint8)
     other = Body(rng, 2003, 60, (0.45, 1.7, 0.4))
@@ -1075,6 +1075,36 @@ def test_box_gate_keeps_a_pedestrian_that_reappears_beside_its_predicted_box(gat
     estimates = trk.track(frame, None, objects).estimates
     assert (e.track_id in {x.track_id for x in estimates}) == (gate_chi2 > 0)
     assert all(x.instance_id == 2002 for x in estimates if x.track_id == e.track_id)
+
+
+@pytest.mark.parametrize("min_fraction", [0.0, 0.8])
+def test_a_car_whose_visible_part_changes_keeps_its_id_by_its_3d_extent(min_fraction):
+    """Crossing s29 f31: a car seen whole, 20 m away and crossing at 5 m/s, goes behind an occluder for 0.2 s and
+    comes back with only its front end in view and a new appearance: the box of that part lies off its predicted box
+    (IoU < join_iou / 2, centre outside the Mahalanobis gate), but its stereo points lie inside the track's 3D extent
+    at its predicted pose (objects.extent_min_fraction), so it keeps its id; without the extent stage it starts a new
+    track. A second car 6 m further along, in the same frame, lies outside the extent and does not take the track."""
+    rng = np.random.default_rng(41)
+    car = Body(rng, 1001, 160, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 20.0])) for i in range(5)]
+    objects, trk = ObjectMap(), tracker(f"objects.extent_min_fraction={min_fraction}")
+    e = track_alone(trk, objects, car, T_car)
+    front = Body(rng, 1002, 0, (1.0, 1.0, 1.0))
+    visible = car.X_b[:, 0] > 1.55
+    front.X_b = car.X_b[visible]
+    front.desc = rng.integers(0, 256, (len(front.X_b), 32)).astype(np.uint8)
+    other = Body(rng, 1003, 160, (4.0, 1.5, 1.5))
+    T_back = make_pose(np.eye(3), np.array([-4.0 + 0.5 * 7, 0.8, 20.0]))
+    frame = make_frame(7, [(front, T_back), (other, T_back @ make_pose(np.eye(3), np.array([6.0, 0.0, 0.0])))])
+    tr = objects.tracks[e.track_id]
+    T_pred = trk.predicted_pose(tr, frame.timestamp)
+    moved = trk.boxes.predicted_box(tr, frame, T_pred, objects)
+    inst_boxes = keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), np.array([1002, 1003]))
+    assert box_iou(moved[None], inst_boxes).max() < 0.5 * trk.cfg.join_iou
+    assert trk.boxes._gate_distance(frame, tr, T_pred, moved, inst_boxes[:1])[0] > trk.cfg.box_gate_chi2
+    estimates = trk.track(frame, None, objects).estimates
+    assert (e.track_id in {x.track_id for x in estimates}) == (min_fraction > 0)
+    assert all(x.instance_id == 1002 for x in estimates if x.track_id == e.track_id)
 
 
 def test_box_association_assigns_the_instances_to_the_tracks_jointly():

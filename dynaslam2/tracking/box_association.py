@@ -3,13 +3,15 @@ seen object of its class continues that object's track), with SORT's motion-comp
 the object's predicted motion, `predicted_box`, or by its image velocity, `image_extrapolated_box`), SORT's max_age
 (the join window counts from the track's newest observation), the frame's instances assigned to the tracks jointly
 (SORT's Hungarian assignment), and, where no box overlaps enough, DeepSORT's Mahalanobis gate on the box centre
-(`objects.box_gate_chi2`), last for the young pedestrian tracks that have no velocity yet."""
+(`objects.box_gate_chi2`), then a vehicle's predicted 3D extent holding the instance's stereo points
+(`objects.extent_min_fraction`), last the gate for the young pedestrian tracks that have no velocity yet."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from dynaslam2.classes import VEHICLE_CLASSES
 from dynaslam2.config import ObjectsConfig
 from dynaslam2.eval.objects import box_covered, box_iou
 from dynaslam2.geometry.camera import StereoCamera
@@ -136,7 +138,7 @@ class BoxAssociation:
         return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
 
     def assign(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
-               boxes: np.ndarray, classes: list[str], max_gap_s: float,
+               boxes: np.ndarray, classes: list[str], X_w: list[np.ndarray], max_gap_s: float,
                stages: tuple[str, ...]) -> list[ObjectTrack | None]:
         """The track each instance box of `boxes` (class `classes`) joins, or None: a joint assignment of the boxes
         to the `tracks` of their class observed within `max_gap_s` (measured or box-joined: SORT's max_age counts
@@ -151,6 +153,9 @@ class BoxAssociation:
         "gate": by the Mahalanobis distance (`_gate_distance` <= box_gate_chi2) to a velocity-known track whose
         moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
         car passing the camera, a box clipped to the image border);
+        "extent": by the fraction of the instance's stereo points `X_w` inside a velocity-known vehicle track's
+        predicted 3D extent (`_extent_fraction` >= extent_min_fraction; a pedestrian's grown extent holds its
+        neighbour);
         "young": likewise to a track without a velocity (its 3D prediction stands still) whose `_last_box` overlaps
         the instance's, when its class has a speed prior tighter than initial_speed_sigma (`initial_speed_sigma`:
         pedestrians) for its filter to start from."""
@@ -174,6 +179,15 @@ class BoxAssociation:
             if stage in ("moved", "box"):
                 iou = iou_moved if stage == "moved" else np.maximum(iou_moved, iou_last)
                 cost, ok = -iou, iou >= cfg.join_iou
+            elif stage == "extent":
+                cost = np.zeros(free.shape)
+                if cfg.extent_min_fraction > 0:
+                    for t in np.flatnonzero(free.any(axis=0)):
+                        if recent[t].velocity_known and recent[t].cls in VEHICLE_CLASSES:
+                            rows = np.flatnonzero(free[:, t])
+                            cost[rows, t] = -self._extent_fraction(objects, recent[t], pred[recent[t].track_id],
+                                                                   [X_w[k] for k in rows])
+                ok = -cost >= max(cfg.extent_min_fraction, 1e-9)
             elif stage not in ("gate", "young"):
                 raise ValueError(f"unknown box association stage {stage!r}")
             elif cfg.box_gate_chi2 > 0 and cfg.filter:
@@ -194,6 +208,19 @@ class BoxAssociation:
                 free[k, :] = False
                 free[:, t] = False
         return joined
+
+    def _extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                         X_w: list[np.ndarray]) -> np.ndarray:
+        """Fraction of each instance's world points `X_w` inside the track's 3D extent at its predicted pose: the
+        5th to 95th percentile per object-frame axis of its points, grown by extent_margin_m (0 without points)."""
+        X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
+        if not len(X_o):
+            return np.zeros(len(X_w))
+        margin = self.cfg.extent_margin_m
+        lo, hi = np.percentile(X_o, 5, axis=0) - margin, np.percentile(X_o, 95, axis=0) + margin
+        T_o_w = np.linalg.inv(T_w_o_pred)
+        return np.array([np.all((P >= lo) & (P <= hi), axis=1).mean() if len(P) else 0.0
+                         for P in (transform(T_o_w, X) for X in X_w)])
 
     def _gate_distance(self, frame: Frame, track: ObjectTrack, T_w_o_pred: np.ndarray, moved: np.ndarray,
                        boxes: np.ndarray) -> np.ndarray:

@@ -15,12 +15,12 @@ mostly match the points of one map object of their class not seen in this frame 
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
 association, the frame's instances assigned jointly; failing that, their box centre lies within the
-Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_chi2`; both in
-`box_association`). Then instances with too few close keypoints keep, by their box alone, a track
-seen within `objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). Last, an
-instance still unclaimed joins a young pedestrian track (no velocity yet) within the gate of its
-last box. A tentative track (fewer than `objects.min_output_observations` observations) that finds
-nothing in a frame is deleted.
+Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_chi2`, or, for a vehicle,
+their stereo points lie inside its predicted 3D extent, `objects.extent_min_fraction`; all in
+`box_association`). Then instances with too few close keypoints keep, by their box alone, a track seen within
+`objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). Last, an instance still unclaimed
+joins a young pedestrian track (no velocity yet) within the gate of its last box. A tentative track (fewer than
+`objects.min_output_observations` observations) that finds nothing in a frame is deleted.
 """
 
 from __future__ import annotations
@@ -295,8 +295,9 @@ class ObjectTracker:
             ks = [k for k in ks if inst_ids[k] not in claimed]
             joined = self.boxes.assign(frame, objects, [tr for tr in active if tr.track_id not in seen], pred,
                                        boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
+                                       [points[k][1] for k in ks],
                                        cfg.join_max_gap_s if with_enough else cfg.coast_max_s,
-                                       ("moved", "box", "gate") if with_enough else ("moved", "box"))
+                                       ("moved", "box", "gate", "extent") if with_enough else ("moved", "box"))
             by_box = {tr.track_id for tr in joined if tr is not None}
             for k, tr in zip(ks, joined):
                 inst = int(inst_ids[k])
@@ -318,7 +319,7 @@ class ObjectTracker:
         unseen = [tr for tr in active if tr.track_id not in seen]
         young = dict(zip(gated, self.boxes.assign(frame, objects, unseen, pred, boxes[gated],
                                                   [_instance_class(int(inst_ids[k])) for k in gated],
-                                                  cfg.join_max_gap_s, ("young",))))
+                                                  [points[k][1] for k in gated], cfg.join_max_gap_s, ("young",))))
         for k in held:
             inst, tr = int(inst_ids[k]), young.get(k)
             tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free)
