@@ -15,7 +15,7 @@ from dynaslam2.classes import VEHICLE_CLASSES
 from dynaslam2.config import ObjectsConfig
 from dynaslam2.eval.objects import box_covered, box_iou
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import transform
+from dynaslam2.geometry.se3 import inverse, transform
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectTrack
 from dynaslam2.tracking.object_filter import initial_speed_sigma, predict_state
@@ -187,7 +187,7 @@ class BoxAssociation:
                             rows = np.flatnonzero(free[:, t])
                             cost[rows, t] = -self._extent_fraction(objects, recent[t], pred[recent[t].track_id],
                                                                    [X_w[k] for k in rows])
-                ok = -cost >= max(cfg.extent_min_fraction, 1e-9)
+                ok = (cost < 0) & (-cost >= cfg.extent_min_fraction)
             elif stage not in ("gate", "young"):
                 raise ValueError(f"unknown box association stage {stage!r}")
             elif cfg.box_gate_chi2 > 0 and cfg.filter:
@@ -218,7 +218,7 @@ class BoxAssociation:
             return np.zeros(len(X_w))
         margin = self.cfg.extent_margin_m
         lo, hi = np.percentile(X_o, 5, axis=0) - margin, np.percentile(X_o, 95, axis=0) + margin
-        T_o_w = np.linalg.inv(T_w_o_pred)
+        T_o_w = inverse(T_w_o_pred)
         return np.array([np.all((P >= lo) & (P <= hi), axis=1).mean() if len(P) else 0.0
                          for P in (transform(T_o_w, X) for X in X_w)])
 
