@@ -32,6 +32,14 @@ class Body:
         self.X_b = rng.uniform(-0.5, 0.5, (n, 3)) * np.asarray(dims)
         self.desc = rng.integers(0, 256, (n, 32)).astype(np.uint8)
 
+    def part(self, visible: np.ndarray, inst: int | None = None, rng: np.random.Generator | None = None) -> Body:
+        """The points `visible` of this body as a body of instance `inst` (this one's by default), with their
+        descriptors, or new ones drawn from `rng` (a new appearance)."""
+        part = Body(np.random.default_rng(0), self.inst if inst is None else inst, 0, (1.0, 1.0, 1.0))
+        part.X_b = self.X_b[visible]
+        part.desc = self.desc[visible] if rng is None else rng.integers(0, 256, (len(part.X_b), 32)).astype(np.uint8)
+        return part
+
 
 def make_frame(index: int, bodies: list[tuple[Body, np.ndarray]], T_c_w: np.ndarray = np.eye(4)) -> Frame:
     """A tracked frame observing each (body, T_w_b): exact stereo keypoints on its instance."""
@@ -65,6 +73,14 @@ def track_alone(trk: ObjectTracker, objects: ObjectMap, body: Body, poses: list[
     for i, T_w_b in enumerate(poses):
         (e,) = trk.track(make_frame(i, [(body, T_w_b)]), None, objects).estimates
     return e
+
+
+def last_box_iou(objects: ObjectMap, track_id: int, frame: Frame) -> float:
+    """IoU of the track's last box with the keypoint box of the one instance in `frame`."""
+    inst = np.unique(frame.instance_id)
+    assert len(inst) == 1
+    return float(box_iou(np.array([objects.tracks[track_id].last.box2d]),
+                         keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), inst))[0, 0])
 
 
 def est_of(estimates, track_id):
@@ -621,17 +637,13 @@ def test_box_association_joins_an_object_emerging_around_its_last_box(contain):
     id only by the containment test (objects.join_contain; the Mahalanobis gate, which keeps it too, off)."""
     rng = np.random.default_rng(22)
     car = Body(rng, 1001, 160, (4.0, 1.5, 1.5))
-    part = Body(rng, 1001, 0, (1.0, 1.0, 1.0))
-    visible = car.X_b[:, 0] > 1.0
-    part.X_b, part.desc = car.X_b[visible], car.desc[visible]
+    part = car.part(car.X_b[:, 0] > 1.0)
     T_car = make_pose(np.eye(3), np.array([0.0, 0.8, 15.0]))
     objects, trk = ObjectMap(), tracker(f"objects.join_contain={contain}", "objects.box_gate_chi2=0")
     e = track_alone(trk, objects, part, [T_car] * 3)
     car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
     frame = make_frame(3, [(car, T_car)])
-    iou = box_iou(np.array([objects.tracks[e.track_id].last.box2d]), keypoint_boxes(
-        frame, np.ones(len(frame.keypoints), bool), np.array([1001])))[0, 0]
-    assert 0.5 * trk.cfg.join_iou <= iou < trk.cfg.join_iou
+    assert 0.5 * trk.cfg.join_iou <= last_box_iou(objects, e.track_id, frame) < trk.cfg.join_iou
     (e3,) = trk.track(frame, None, objects).estimates
     assert (e3.track_id == e.track_id) == (contain > 0)
 
@@ -647,14 +659,9 @@ def test_box_association_joins_a_partly_hidden_object_inside_its_predicted_box(c
     T_person = make_pose(np.eye(3), np.array([0.5, 0.3, 8.0]))
     objects, trk = ObjectMap(), tracker(f"objects.join_contain={contain}", "objects.box_gate_chi2=0")
     e = track_alone(trk, objects, person, [T_person] * 3)
-    top = Body(rng, 2001, 0, (1.0, 1.0, 1.0))
-    visible = person.X_b[:, 1] < -0.45  # the top quarter (camera y points down)
-    top.X_b = person.X_b[visible]
-    top.desc = rng.integers(0, 256, (len(top.X_b), 32)).astype(np.uint8)
+    top = person.part(person.X_b[:, 1] < -0.45, rng=rng)  # the top quarter (camera y points down)
     frame = make_frame(3, [(top, T_person)])
-    iou = box_iou(np.array([objects.tracks[e.track_id].last.box2d]), keypoint_boxes(
-        frame, np.ones(len(frame.keypoints), bool), np.array([2001])))[0, 0]
-    assert 0.5 * trk.cfg.join_iou <= iou < trk.cfg.join_iou
+    assert 0.5 * trk.cfg.join_iou <= last_box_iou(objects, e.track_id, frame) < trk.cfg.join_iou
     (e3,) = trk.track(frame, None, objects).estimates
     assert (e3.track_id == e.track_id) == (contain > 0)
 
@@ -1089,10 +1096,7 @@ def test_a_car_whose_visible_part_changes_keeps_its_id_by_its_3d_extent(min_frac
     T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 20.0])) for i in range(5)]
     objects, trk = ObjectMap(), tracker(f"objects.extent_min_fraction={min_fraction}")
     e = track_alone(trk, objects, car, T_car)
-    front = Body(rng, 1002, 0, (1.0, 1.0, 1.0))
-    visible = car.X_b[:, 0] > 1.55
-    front.X_b = car.X_b[visible]
-    front.desc = rng.integers(0, 256, (len(front.X_b), 32)).astype(np.uint8)
+    front = car.part(car.X_b[:, 0] > 1.55, inst=1002, rng=rng)
     other = Body(rng, 1003, 160, (4.0, 1.5, 1.5))
     T_back = make_pose(np.eye(3), np.array([-4.0 + 0.5 * 7, 0.8, 20.0]))
     frame = make_frame(7, [(front, T_back), (other, T_back @ make_pose(np.eye(3), np.array([6.0, 0.0, 0.0])))])
