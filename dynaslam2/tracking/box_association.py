@@ -172,9 +172,7 @@ class BoxAssociation:
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
         open_box = np.all(np.isfinite(boxes), axis=1)
         free = open_box[:, None] & (np.array(classes)[:, None] == np.array([tr.cls for tr in recent])[None])
-        iou_moved, iou_last = np.zeros(free.shape), np.zeros(free.shape)
-        for k in np.flatnonzero(open_box):
-            iou_moved[k], iou_last[k] = self._join_overlap(boxes[k], moved), self._join_overlap(boxes[k], last)
+        iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
         for stage in stages:
             if stage in ("moved", "box"):
                 iou = iou_moved if stage == "moved" else np.maximum(iou_moved, iou_last)
@@ -246,14 +244,14 @@ class BoxAssociation:
         moving = None if track.velocity_known else self.image_extrapolated_box(track, timestamp)
         return np.asarray(track.last.box2d if moving is None else moving, dtype=float)
 
-    def _join_overlap(self, box: np.ndarray, track_boxes: np.ndarray) -> np.ndarray:
-        """IoU of the instance's `box` with each of `track_boxes`, raised to join_iou where one of the two boxes lies
-        >= join_contain inside the other with an IoU of >= join_iou / 2: an object emerging from behind an occluder
-        (its box grows around the partly visible last one) or going behind one (its box shrinks inside it)."""
+    def _join_overlap(self, boxes: np.ndarray, track_boxes: np.ndarray) -> np.ndarray:
+        """(K, M) IoU of the instance boxes `boxes` with the `track_boxes` (0 for a NaN box), raised to join_iou where
+        one of two boxes lies >= join_contain inside the other with an IoU of >= join_iou / 2: an object emerging
+        from behind an occluder (its box grows around the partly visible last one) or going behind one (its box
+        shrinks inside it)."""
         cfg = self.cfg
-        iou = box_iou(box[None], track_boxes)[0]
+        iou = box_iou(boxes, track_boxes)
         if not cfg.join_contain:
             return iou
-        covered = np.maximum(box_covered(box[None], track_boxes)[0], box_covered(track_boxes, box[None])[:, 0])
-        inside = covered >= cfg.join_contain
+        inside = np.maximum(box_covered(boxes, track_boxes), box_covered(track_boxes, boxes).T) >= cfg.join_contain
         return np.where(inside & (iou >= 0.5 * cfg.join_iou), np.maximum(iou, cfg.join_iou), iou)
