@@ -205,7 +205,7 @@ class System:
         if self.object_tracker is None:
             return []
         t0 = time.perf_counter()
-        weak = self.object_tracker.track(frame, data.instances, self.objects).weak
+        weak = self.object_tracker.track(frame, data.instances, self.objects, data.left).weak
         timing["objects"] = (time.perf_counter() - t0) * 1e3
         return weak
 

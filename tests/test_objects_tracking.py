@@ -15,6 +15,7 @@ from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp, so3_log
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import motion_increment
+from dynaslam2.tracking.appearance import gallery_distance, instance_histograms
 from dynaslam2.tracking.box_association import _hungarian, keypoint_boxes
 from dynaslam2.tracking.object_filter import filter_position
 from dynaslam2.tracking.objects import ObjectTracker, PoseProposal, first_claim, rigid_fit
@@ -395,7 +396,8 @@ def test_object_creation_thresholds():
 
 @pytest.mark.parametrize("key,value", [("min_inliers", 2), ("join_ratio", 1.5), ("max_lost_s", 0),
                                        ("box_velocity_window_s", -0.1), ("join_contain", 1.5),
-                                       ("register_chi2", 0)])
+                                       ("register_chi2", 0), ("appearance_max_distance", 1.5),
+                                       ("appearance_bins", 0), ("appearance_bins", 17), ("appearance_gallery", 0)])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 
@@ -1176,3 +1178,62 @@ def test_box_gate_keeps_a_young_pedestrian_track_without_a_velocity(gate_chi2):
     estimates = trk.track(frame, None, objects).estimates
     assert (e.track_id in {x.track_id for x in estimates}) == (gate_chi2 > 0)
     assert all(x.instance_id == 2002 for x in estimates if x.track_id == e.track_id)
+
+
+def painted(frame: Frame, colours: dict[int, tuple[int, int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """An instance image (each instance's keypoint box filled with its id) and an RGB image with each instance's
+    box in its colour `colours[inst]`, for `frame`."""
+    instances = np.zeros((CAMERA.height, CAMERA.width), np.int64)
+    image = np.full((CAMERA.height, CAMERA.width, 3), 128, np.uint8)
+    inst_ids = np.unique(frame.instance_id)
+    for inst, (u0, v0, u1, v1) in zip(inst_ids.tolist(), keypoint_boxes(frame, frame.instance_id > 0, inst_ids)):
+        box = np.s_[int(v0):int(v1) + 1, int(u0):int(u1) + 1]
+        instances[box], image[box] = inst, colours[inst]
+    return instances, image
+
+
+@pytest.mark.parametrize("max_distance", [0.0, 0.4])
+def test_a_track_does_not_take_an_instance_of_another_appearance(max_distance):
+    """Two pedestrians, red and blue, walk side by side; then the red one is hidden and the keypoints on the blue
+    one's instance carry the look of the red one's points, shifted by the 0.3 m between them (a neighbour's
+    keypoints matching a pedestrian's points: crossing s53 f92, s54 f67). The red track's pose fits them and took
+    the blue instance (max_distance 0: the hop that gives an unoccluded id switch); its colour histogram lies far
+    from the red track's gallery, so the blue track keeps it by its box."""
+    rng = np.random.default_rng(5)
+    dims = (0.5, 1.7, 0.4)
+    red, blue = Body(rng, 2001, 60, dims), Body(rng, 2002, 60, dims)
+    at = [[make_pose(np.eye(3), np.array([x + 0.05 * i, 0.6, 12.0])) for i in range(6)] for x in (-0.3, 0.0)]
+    colours = {2001: (200, 30, 30), 2002: (30, 30, 200)}
+    objects, trk = ObjectMap(), tracker(f"objects.appearance_max_distance={max_distance}")
+    for i in range(5):
+        frame = make_frame(i, [(red, at[0][i]), (blue, at[1][i])])
+        instances, image = painted(frame, colours)
+        estimates = trk.track(frame, instances, objects, image).estimates
+    track_of = {e.instance_id: e.track_id for e in estimates}
+    look_of_red = red.part(np.arange(60), inst=2002)
+    frame = make_frame(5, [(look_of_red, at[1][5])])
+    instances, image = painted(frame, colours)
+    ids = {e.instance_id: e.track_id for e in trk.track(frame, instances, objects, image).estimates}
+    assert ids == ({2002: track_of[2001]} if max_distance == 0 else {2002: track_of[2002]})
+
+
+def test_instance_histograms_and_gallery_distance():
+    """Histograms over each instance's mask (NaN below min_pixels), grey images in bins^2 levels; the Bhattacharyya
+    distance to the nearest gallery entry: 0 for the same colours, 1 for disjoint ones, NaN without evidence."""
+    instances = np.zeros((20, 30), np.int64)
+    instances[:10, :10], instances[:10, 10:20], instances[15:, 25:] = 1, 2, 3
+    image = np.zeros((20, 30, 3), np.uint8)
+    image[:10, :5] = (255, 0, 0)
+    image[:10, 5:10] = (0, 255, 0)
+    image[:10, 10:20] = (0, 255, 0)
+    hist = instance_histograms(image, instances, np.array([1, 2, 3]), 4, 30)
+    assert hist.shape == (3, 64) and np.allclose(hist[:2].sum(axis=1), 1.0) and np.all(np.isnan(hist[2]))
+    assert hist[0, 48] == pytest.approx(0.5) and hist[0, 12] == pytest.approx(0.5) and hist[1, 12] == 1.0
+    d = gallery_distance(hist, [hist[1]])
+    assert d[0] == pytest.approx(np.sqrt(1 - np.sqrt(0.5))) and d[1] == pytest.approx(0.0) and np.isnan(d[2])
+    assert gallery_distance(hist, [hist[1], hist[0]])[0] == pytest.approx(0.0)
+    assert np.all(np.isnan(gallery_distance(hist, [])))
+    grey = instance_histograms(image[..., 1], instances, np.array([1, 2]), 4, 30)
+    assert grey.shape == (2, 16) and grey[0, 0] == pytest.approx(0.5) and grey[1, 15] == 1.0
+    disjoint = instance_histograms(np.full((20, 30, 3), 255, np.uint8), instances, np.array([1]), 4, 30)
+    assert gallery_distance(disjoint, [hist[1]])[0] == pytest.approx(1.0)

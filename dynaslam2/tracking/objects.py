@@ -19,8 +19,10 @@ Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_c
 their stereo points lie inside its predicted 3D extent, `objects.extent_min_fraction`; all in
 `box_association`). Then instances with too few close keypoints keep, by their box alone, a track seen within
 `objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). Last, an instance still unclaimed
-joins a young pedestrian track (no velocity yet) within the gate of its last box. A tentative track (fewer than
-`objects.min_output_observations` observations) that finds nothing in a frame is deleted.
+joins a young pedestrian track (no velocity yet) within the gate of its last box. No claim, vote or box join gives a
+person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
+`objects.appearance_max_distance`). A tentative track (fewer than `objects.min_output_observations` observations)
+that finds nothing in a frame is deleted.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynaslam2.classes import CLASS_IDS, CLASS_NAMES, DYNAMIC_CLASSES, INSTANCE_CLASS_FACTOR
+from dynaslam2.classes import CLASS_IDS, CLASS_NAMES, DYNAMIC_CLASSES, INSTANCE_CLASS_FACTOR, VEHICLE_CLASSES
 from dynaslam2.config import SlamConfig
 from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
@@ -39,6 +41,7 @@ from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, predict_object_pose
+from dynaslam2.tracking.appearance import gallery_distance, instance_histograms
 from dynaslam2.tracking.box_association import BoxAssociation, instance_boxes, keypoint_boxes
 from dynaslam2.tracking.object_filter import capped_angular_velocity, filter_position, filter_rotation, gated
 
@@ -234,9 +237,11 @@ class ObjectTracker:
         return T_w_o, inliers
 
     # ------------------------------------------------------------------ main
-    def track(self, frame: Frame, instances: np.ndarray | None, objects: ObjectMap) -> ObjectFrameResult:
+    def track(self, frame: Frame, instances: np.ndarray | None, objects: ObjectMap,
+              image: np.ndarray | None = None) -> ObjectFrameResult:
         """Track the objects of `frame` (camera pose already estimated), create new ones; see the
-        module docstring for the order of the steps."""
+        module docstring for the order of the steps. `image` (the left image, with `instances`): the
+        instances' appearance (objects.appearance_max_distance)."""
         cfg = self.cfg
         t = frame.timestamp
         dyn = dynamic_keypoints(frame)
@@ -247,6 +252,9 @@ class ObjectTracker:
         active = [tr for tr in objects.tracks.values()
                   if tr.last.frame_index < frame.index and t - tr.last.timestamp <= cfg.max_lost_s]
         pred = {tr.track_id: self.predicted_pose(tr, t) for tr in active}
+        hist = (instance_histograms(image, instances, inst_ids, cfg.appearance_bins, cfg.appearance_min_pixels)
+                if cfg.appearance_max_distance > 0 and image is not None and instances is not None else None)
+        foreign = self._foreign(active, hist, inst_ids)
         candidates = self._search_projection(frame, objects, [tr for tr in active if tr.velocity_known], pred, dyn)
         for tr in active:
             if tr.track_id not in candidates:
@@ -257,7 +265,8 @@ class ObjectTracker:
         # most inliers (`first_claim`). An object whose instance went to another tries its next instance.
         claimed: set[int] = set()
         seen: list[int] = []
-        proposals = {tid: self._propose(frame, objects, objects.tracks[tid], pred[tid], *candidates[tid], free, claimed)
+        proposals = {tid: self._propose(frame, objects, objects.tracks[tid], pred[tid], *candidates[tid], free,
+                                        claimed | foreign[tid])
                      for tid in candidates}
         while any(p is not None for p in proposals.values()):
             tid = first_claim(proposals, pred)
@@ -272,7 +281,7 @@ class ObjectTracker:
             for other, p in proposals.items():
                 if p is not None and p.instance_id == best.instance_id:
                     proposals[other] = self._propose(frame, objects, objects.tracks[other], pred[other],
-                                                     *candidates[other], free, claimed)
+                                                     *candidates[other], free, claimed | foreign[other])
         # Unclaimed instances: re-appearing objects or new ones, first those with enough close keypoints, then
         # (coast_max_s) the others. In each pass the point votes go first; the instances left are assigned to the
         # unseen tracks jointly by their boxes (`BoxAssociation.assign`), so that a mostly hidden neighbour cannot
@@ -287,15 +296,15 @@ class ObjectTracker:
             voted = {}
             for k in ks:
                 inst = int(inst_ids[k])
-                tid, voted[k] = self._join_by_vote(frame, objects, self._unseen(active, seen, inst), pred, inst,
-                                                   points[k], boxes[k], free)
+                tid, voted[k] = self._join_by_vote(frame, objects, self._unseen(active, seen, inst, foreign), pred,
+                                                   inst, points[k], boxes[k], free)
                 if tid is not None:
                     seen.append(tid)
                     claimed.add(inst)
             ks = [k for k in ks if inst_ids[k] not in claimed]
             joined = self.boxes.assign(frame, objects, [tr for tr in active if tr.track_id not in seen], pred,
                                        boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
-                                       [points[k][1] for k in ks],
+                                       [points[k][1] for k in ks], None if hist is None else hist[ks],
                                        cfg.join_max_gap_s if with_enough else cfg.coast_max_s,
                                        ("moved", "box", "gate", "extent") if with_enough else ("moved", "box"))
             by_box = {tr.track_id for tr in joined if tr is not None}
@@ -319,7 +328,8 @@ class ObjectTracker:
         unseen = [tr for tr in active if tr.track_id not in seen]
         young = dict(zip(gated, self.boxes.assign(frame, objects, unseen, pred, boxes[gated],
                                                   [_instance_class(int(inst_ids[k])) for k in gated],
-                                                  [points[k][1] for k in gated], cfg.join_max_gap_s, ("young",))))
+                                                  [points[k][1] for k in gated], None if hist is None else hist[gated],
+                                                  cfg.join_max_gap_s, ("young",))))
         for k in held:
             inst, tr = int(inst_ids[k]), young.get(k)
             tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free)
@@ -328,6 +338,8 @@ class ObjectTracker:
                 seen.append(tid)
                 claimed.add(inst)
         self._cull(objects, seen)
+        if hist is not None:
+            self._remember_appearance(frame, objects, seen, hist, inst_ids)
         for tr in active:  # tentative and unmatched: deleted (DeepSORT)
             if tr.track_id not in seen and len(tr.observations) < cfg.min_output_observations:
                 objects.remove_track(tr.track_id)
@@ -470,9 +482,33 @@ class ObjectTracker:
         return info[:3, :3], np.linalg.inv(info + 1e-9 * np.eye(6))[3:, 3:]
 
     @staticmethod
-    def _unseen(active: list[ObjectTrack], seen: list[int], inst: int) -> list[ObjectTrack]:
-        """The active tracks of instance `inst`'s class not seen in this frame."""
-        return [tr for tr in active if tr.track_id not in seen and tr.cls == _instance_class(inst)]
+    def _unseen(active: list[ObjectTrack], seen: list[int], inst: int, foreign: dict[int, set[int]]
+                ) -> list[ObjectTrack]:
+        """The active tracks of instance `inst`'s class not seen in this frame that do not find it foreign."""
+        return [tr for tr in active if tr.track_id not in seen and tr.cls == _instance_class(inst)
+                and inst not in foreign[tr.track_id]]
+
+    def _foreign(self, active: list[ObjectTrack], hist: np.ndarray | None, inst_ids: np.ndarray
+                 ) -> dict[int, set[int]]:
+        """Per active track, the instance ids whose colour histogram (`hist`, rows of `inst_ids`) lies further than
+        appearance_max_distance from every one of its gallery (`gallery_distance`): not the track's object."""
+        if hist is None:
+            return {tr.track_id: set() for tr in active}
+        return {tr.track_id: set(inst_ids[gallery_distance(hist, tr.appearance) > self.cfg.appearance_max_distance]
+                                 .tolist()) for tr in active}
+
+    def _remember_appearance(self, frame: Frame, objects: ObjectMap, seen: list[int], hist: np.ndarray,
+                             inst_ids: np.ndarray) -> None:
+        """Add the histogram of each seen person's instance in `frame` to its track's gallery (the newest
+        appearance_gallery kept; an instance too small to judge adds none). Vehicles keep none: their faces differ
+        (crossing s41: a truck's lavender front, then its olive side as it turned, 0.54 from its gallery)."""
+        for tid in seen:
+            tr = objects.tracks.get(tid)
+            if tr is None or tr.cls in VEHICLE_CLASSES or tr.last.frame_index != frame.index:
+                continue
+            h = hist[np.searchsorted(inst_ids, tr.last.instance_id)]
+            if np.all(np.isfinite(h)):
+                tr.appearance = [*tr.appearance, h][-self.cfg.appearance_gallery:]
 
     def _join_by_vote(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                       inst: int, points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray
