@@ -605,6 +605,13 @@ class ObjectsConfig:
     appearance_bins: int = 4
     appearance_min_pixels: int = 30
     appearance_gallery: int = 10
+    # A pose claim or point vote also skips an instance that lies appearance_margin closer to another active track's
+    # gallery than to the track's own (a look-alike within appearance_max_distance: crossing s14 f121, two
+    # pedestrians in dark clothes 0.40-0.53 apart, a hop there and back; box joins keep the absolute test only).
+    # 0.2 a first choice. 0 -> 0.2: traffic, crossing, static 10-14 id switches 8 -> 6 (unoccluded 2 -> 0); crossing
+    # 40-54 21 -> 23 (0 -> 0; s51: two tracks of one pedestrian, each refused it for the other's closer gallery);
+    # every other figure of seeds 0-4, 5-9, 10-14, 15-19, 20-24, crossing 40-54 and 55-69 unchanged.
+    appearance_margin: float = 0.2
     # A track joined by box IoU is translated from its prediction onto the instance's keypoints that
     # match its points (3D offsets), when at least register_min_matches agree: an offset agrees when it lies
     # within register_chi2 (3 dof) of the registered shift in its stereo uncertainty (along the viewing ray the
@@ -768,7 +775,7 @@ class ObjectsConfig:
                 raise ConfigError(f"objects.{name}: expected >= 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",
                      "projection_nn_ratio", "weak_tracked_ratio", "small_new_fraction", "join_contain",
-                     "extent_min_fraction", "appearance_max_distance"):
+                     "extent_min_fraction", "appearance_max_distance", "appearance_margin"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"objects.{name}: expected in [0, 1], got {getattr(self, name)}")
 

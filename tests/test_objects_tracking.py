@@ -1180,15 +1180,20 @@ def test_box_gate_keeps_a_young_pedestrian_track_without_a_velocity(gate_chi2):
     assert all(x.instance_id == 2002 for x in estimates if x.track_id == e.track_id)
 
 
-def painted(frame: Frame, colours: dict[int, tuple[int, int, int]]) -> tuple[np.ndarray, np.ndarray]:
+def painted(frame: Frame, colours: dict[int, tuple]) -> tuple[np.ndarray, np.ndarray]:
     """An instance image (each instance's keypoint box filled with its id) and an RGB image with each instance's
-    box in its colour `colours[inst]`, for `frame`."""
+    box in its colour `colours[inst]`: one RGB triple, or a list of (RGB, fraction of the rows), top to bottom."""
     instances = np.zeros((CAMERA.height, CAMERA.width), np.int64)
     image = np.full((CAMERA.height, CAMERA.width, 3), 128, np.uint8)
     inst_ids = np.unique(frame.instance_id)
     for inst, (u0, v0, u1, v1) in zip(inst_ids.tolist(), keypoint_boxes(frame, frame.instance_id > 0, inst_ids)):
-        box = np.s_[int(v0):int(v1) + 1, int(u0):int(u1) + 1]
-        instances[box], image[box] = inst, colours[inst]
+        instances[int(v0):int(v1) + 1, int(u0):int(u1) + 1] = inst
+        stripes = colours[inst] if isinstance(colours[inst], list) else [(colours[inst], 1.0)]
+        top = v0
+        for rgb, fraction in stripes:
+            bottom = top + fraction * (v1 + 1 - v0)
+            image[int(round(top)):int(round(bottom)), int(u0):int(u1) + 1] = rgb
+            top = bottom
     return instances, image
 
 
@@ -1237,3 +1242,30 @@ def test_instance_histograms_and_gallery_distance():
     assert grey.shape == (2, 16) and grey[0, 0] == pytest.approx(0.5) and grey[1, 15] == 1.0
     disjoint = instance_histograms(np.full((20, 30, 3), 255, np.uint8), instances, np.array([1]), 4, 30)
     assert gallery_distance(disjoint, [hist[1]])[0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("margin", [0.0, 0.2])
+def test_a_track_does_not_take_an_instance_that_looks_like_another_track_more(margin):
+    """As above, but the two pedestrians share a shirt colour and differ in their trousers (a tenth of the box):
+    0.32 apart, within appearance_max_distance (crossing s14 f121: two pedestrians in dark clothes 0.40-0.53
+    apart). The blue-trousered instance lies 0.32 from the red-trousered track's gallery and 0 from its own
+    track's: with appearance_margin 0.2 the red track does not take it; without, it hops."""
+    rng = np.random.default_rng(5)
+    dims = (0.5, 1.7, 0.4)
+    red, blue = Body(rng, 2001, 60, dims), Body(rng, 2002, 60, dims)
+    at = [[make_pose(np.eye(3), np.array([x + 0.05 * i, 0.6, 12.0])) for i in range(6)] for x in (-0.3, 0.0)]
+    shirt = (90, 90, 90)
+    colours = {2001: [(shirt, 0.9), ((200, 30, 30), 0.1)], 2002: [(shirt, 0.9), ((30, 30, 200), 0.1)]}
+    objects = ObjectMap()
+    trk = tracker("objects.appearance_max_distance=0.4", f"objects.appearance_margin={margin}")
+    for i in range(5):
+        frame = make_frame(i, [(red, at[0][i]), (blue, at[1][i])])
+        instances, image = painted(frame, colours)
+        estimates = trk.track(frame, instances, objects, image).estimates
+    track_of = {e.instance_id: e.track_id for e in estimates}
+    frame = make_frame(5, [(red.part(np.arange(60), inst=2002), at[1][5])])
+    instances, image = painted(frame, colours)
+    hist = instance_histograms(image, instances, np.array([2002]), 4, 30)
+    assert 0.25 < gallery_distance(hist, objects.tracks[track_of[2001]].appearance)[0] < 0.4
+    ids = {e.instance_id: e.track_id for e in trk.track(frame, instances, objects, image).estimates}
+    assert ids == ({2002: track_of[2001]} if margin == 0 else {2002: track_of[2002]})

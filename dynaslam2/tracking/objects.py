@@ -491,11 +491,18 @@ class ObjectTracker:
     def _foreign(self, active: list[ObjectTrack], hist: np.ndarray | None, inst_ids: np.ndarray
                  ) -> dict[int, set[int]]:
         """Per active track, the instance ids whose colour histogram (`hist`, rows of `inst_ids`) lies further than
-        appearance_max_distance from every one of its gallery (`gallery_distance`): not the track's object."""
+        appearance_max_distance from every one of its gallery (`gallery_distance`), or further by appearance_margin
+        than from another active track's gallery: not the track's object (its pose claims and votes skip them)."""
         if hist is None:
             return {tr.track_id: set() for tr in active}
-        return {tr.track_id: set(inst_ids[gallery_distance(hist, tr.appearance) > self.cfg.appearance_max_distance]
-                                 .tolist()) for tr in active}
+        d = np.array([gallery_distance(hist, tr.appearance) for tr in active]).reshape(len(active), len(inst_ids))
+        far = d > self.cfg.appearance_max_distance
+        if self.cfg.appearance_margin > 0 and len(active) > 1:
+            ds = np.where(np.isnan(d), np.inf, d)
+            order = np.sort(ds, axis=0)
+            others = np.where(ds == order[0], order[1], order[0])  # the nearest other gallery per (track, instance)
+            far |= d > others + self.cfg.appearance_margin
+        return {tr.track_id: set(inst_ids[far[t]].tolist()) for t, tr in enumerate(active)}
 
     def _remember_appearance(self, frame: Frame, objects: ObjectMap, seen: list[int], hist: np.ndarray,
                              inst_ids: np.ndarray) -> None:
