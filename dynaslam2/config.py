@@ -612,6 +612,18 @@ class ObjectsConfig:
     # 40-54 21 -> 23 (0 -> 0; s51: two tracks of one pedestrian, each refused it for the other's closer gallery);
     # every other figure of seeds 0-4, 5-9, 10-14, 15-19, 20-24, crossing 40-54 and 55-69 unchanged.
     appearance_margin: float = 0.2
+    # DeepSORT's appearance cascade for lost tracks: an instance that no earlier stage took joins the person's track
+    # lost within max_lost_s whose gallery lies within appearance_reid_distance of its histogram (Hungarian on the
+    # distance) and whose predicted box centre gates it (box_gate_chi2); the track is re-anchored on the instance
+    # when the registration finds no match (its prediction after a second or two is metres off: without, crossing
+    # s44's pedestrian, back after 1.6 s with a 4 m off prediction, got 5.1 m of ATE). Crossing s64: a pedestrian
+    # 1.3 s in the left image border, beyond the box window, kept its id. 0.2 a first choice (same-object claims:
+    # 90th percentile 0.12). Off -> 0.2 (after appearance_margin): crossing 40-54 id switches 23 -> 19 (unoccluded
+    # 0 -> 0), short gaps kept 81/83 -> 83/85, object ATE 0.271 -> 0.276 m, TP 0.725 -> 0.729; traffic, crossing,
+    # static 10-14 6 -> 4 (0), 53/55 -> 55/55, 0.182 -> 0.190 m, 0.824 -> 0.828; crossing 55-69 19 (1) -> 15 (0),
+    # 82/82 -> 84/84, 0.275 -> 0.276 m; 15-19 6 -> 2 (0), 40/42 -> 41/42, 0.200 -> 0.204 m; 20-24 1 (0) and 27/29
+    # either way, 0.174 -> 0.175 m, TP 0.807 -> 0.809. Seeds 0-4 and 5-9 not rerun with it.
+    appearance_reid_distance: float = 0.2
     # A track joined by box IoU is translated from its prediction onto the instance's keypoints that
     # match its points (3D offsets), when at least register_min_matches agree: an offset agrees when it lies
     # within register_chi2 (3 dof) of the registered shift in its stereo uncertainty (along the viewing ray the
@@ -775,7 +787,8 @@ class ObjectsConfig:
                 raise ConfigError(f"objects.{name}: expected >= 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",
                      "projection_nn_ratio", "weak_tracked_ratio", "small_new_fraction", "join_contain",
-                     "extent_min_fraction", "appearance_max_distance", "appearance_margin"):
+                     "extent_min_fraction", "appearance_max_distance", "appearance_margin",
+                     "appearance_reid_distance"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"objects.{name}: expected in [0, 1], got {getattr(self, name)}")
 

@@ -1269,3 +1269,29 @@ def test_a_track_does_not_take_an_instance_that_looks_like_another_track_more(ma
     assert 0.25 < gallery_distance(hist, objects.tracks[track_of[2001]].appearance)[0] < 0.4
     ids = {e.instance_id: e.track_id for e in trk.track(frame, instances, objects, image).estimates}
     assert ids == ({2002: track_of[2001]} if margin == 0 else {2002: track_of[2002]})
+
+
+@pytest.mark.parametrize("reid_distance, shift_m, same_track", [(0.0, 0.0, False), (0.2, 0.0, True), (0.2, -5.0, False)])
+def test_a_person_lost_beyond_the_box_window_is_reidentified_by_appearance(reid_distance, shift_m, same_track):
+    """A pedestrian walking across at 1 m/s is unseen for 1.5 s (beyond join_max_gap_s and coast_max_s; crossing
+    s64: in the left image border, where no stereo reaches) and comes back new in look (no point matches). Its
+    colours match its track's gallery and its box lies within the gate of its predicted box: it keeps its id
+    (without the stage, a new track); a pedestrian in the same colours 5 m off the prediction gets a new track."""
+    rng = np.random.default_rng(9)
+    walker = Body(rng, 2001, 60, (0.5, 1.7, 0.4))
+    at = [make_pose(np.eye(3), np.array([-2.0 + 0.1 * i, 0.6, 15.0])) for i in range(21)]
+    colours = {2001: (200, 30, 30), 2002: (200, 30, 30)}
+    objects = ObjectMap()
+    trk = tracker("objects.appearance_max_distance=0.4", f"objects.appearance_reid_distance={reid_distance}")
+    for i in range(5):
+        frame = make_frame(i, [(walker, at[i])])
+        instances, image = painted(frame, colours)
+        estimates = trk.track(frame, instances, objects, image).estimates
+    (first,) = [e.track_id for e in estimates]
+    for i in range(5, 20):
+        trk.track(make_frame(i, []), None, objects)
+    back = walker.part(np.arange(60), inst=2002, rng=rng)
+    frame = make_frame(20, [(back, at[20] @ make_pose(np.eye(3), np.array([shift_m, 0.0, 0.0])))])
+    instances, image = painted(frame, colours)
+    trk.track(frame, instances, objects, image)
+    assert (objects.tracks[first].last.instance_id == 2002) == same_track

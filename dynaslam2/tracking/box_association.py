@@ -160,7 +160,10 @@ class BoxAssociation:
         neighbour);
         "young": likewise to a track without a velocity (its 3D prediction stands still) whose `_last_box` overlaps
         the instance's, when its class has a speed prior tighter than initial_speed_sigma (`initial_speed_sigma`:
-        pedestrians) for its filter to start from."""
+        pedestrians) for its filter to start from;
+        "appearance": by the distance of the instance's histogram to a person track's gallery (<=
+        appearance_reid_distance) within the Mahalanobis gate of its predicted box (re-identification of a track
+        lost beyond the box window)."""
         cfg = self.cfg
         joined: list[ObjectTrack | None] = [None] * len(boxes)
         if not len(boxes):
@@ -191,6 +194,15 @@ class BoxAssociation:
                             cost[rows, t] = -self._extent_fraction(objects, recent[t], pred[recent[t].track_id],
                                                                    [X_w[k] for k in rows])
                 ok = (cost < 0) & (-cost >= cfg.extent_min_fraction)
+            elif stage == "appearance":
+                cost = np.full(free.shape, np.inf)
+                for t in np.flatnonzero(free.any(axis=0)):
+                    tr, rows = recent[t], np.flatnonzero(free[:, t])
+                    if tr.appearance and tr.state_mean is not None:
+                        d2 = self._gate_distance(frame, tr, pred[tr.track_id], moved[t], boxes[rows])
+                        cost[rows, t] = np.where(d2 <= cfg.box_gate_chi2,
+                                                 gallery_distance(appearance[rows], tr.appearance), np.inf)
+                ok = cost <= cfg.appearance_reid_distance
             elif stage not in ("gate", "young"):
                 raise ValueError(f"unknown box association stage {stage!r}")
             elif cfg.box_gate_chi2 > 0 and cfg.filter:

@@ -21,8 +21,9 @@ their stereo points lie inside its predicted 3D extent, `objects.extent_min_frac
 `objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). Last, an instance still unclaimed
 joins a young pedestrian track (no velocity yet) within the gate of its last box. No claim, vote or box join gives a
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
-`objects.appearance_max_distance`). A tentative track (fewer than `objects.min_output_observations` observations)
-that finds nothing in a frame is deleted.
+`objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
+its colours and the gate (`objects.appearance_reid_distance`). A tentative track (fewer than
+`objects.min_output_observations` observations) that finds nothing in a frame is deleted.
 """
 
 from __future__ import annotations
@@ -330,9 +331,19 @@ class ObjectTracker:
                                                   [_instance_class(int(inst_ids[k])) for k in gated],
                                                   [points[k][1] for k in gated], None if hist is None else hist[gated],
                                                   cfg.join_max_gap_s, ("young",))))
+        lost = [k for k in gated if young[k] is None]
+        reidentified = set()
+        if hist is not None and cfg.appearance_reid_distance > 0 and lost:
+            taken = {tr.track_id for tr in young.values() if tr is not None}
+            young.update(zip(lost, self.boxes.assign(frame, objects, [tr for tr in unseen if tr.track_id not in taken],
+                                                     pred, boxes[lost], [_instance_class(int(inst_ids[k])) for k in lost],
+                                                     [points[k][1] for k in lost], hist[lost], cfg.max_lost_s,
+                                                     ("appearance",))))
+            reidentified = {k for k in lost if young[k] is not None}
         for k in held:
             inst, tr = int(inst_ids[k]), young.get(k)
-            tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free)
+            tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free,
+                                  reanchor=k in reidentified)
                    if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
             if tid is not None:
                 seen.append(tid)
@@ -532,7 +543,8 @@ class ObjectTracker:
         return self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted), voted[0]
 
     def _box_join(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, inst: int,
-                  points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray) -> int:
+                  points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray,
+                  reanchor: bool = False) -> int:
         """The instance joins `track` by its box (`BoxAssociation.assign`): the track goes on at its
         constant-velocity prediction, translated by the registration on the keypoints that match its points
         (`_register`; a measurement of its position for the filter, with the registration's information); the
@@ -545,7 +557,7 @@ class ObjectTracker:
             kp, X_w = kp[:0], X_w[:0]
         T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
         if not len(kp_in) and len(kp):
-            T_w_o = self._reanchor(objects, track, T_w_o, X_w)
+            T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
         rest = ~np.isin(kp, kp_in)
         new = objects.add_points(track.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
                                  frame.keypoints.desc[kp[rest]], self._depth_weight(frame, kp[rest]))
@@ -675,7 +687,8 @@ class ObjectTracker:
         along = ray[:, :, None] * ray[:, None, :]
         return along / var_along[:, None, None] + (np.eye(3) - along) / var_across[:, None, None]
 
-    def _reanchor(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray) -> np.ndarray:
+    def _reanchor(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray,
+                  always: bool = False) -> np.ndarray:
         """The pose at which a box join adds the instance's points `X_w` to `track`: the prediction, or, when
         their median would lie beyond max_point_spread_m of the box of the track's points (object frame; a
         prediction run off, e.g. in depth while the object was seen without stereo), the prediction translated
@@ -687,7 +700,7 @@ class ObjectTracker:
         R, t = T_w_o_pred[:3, :3], T_w_o_pred[:3, 3]
         median_new = np.median((X_w - t) @ R, axis=0)
         outside = np.maximum(X_o.min(axis=0) - median_new, 0.0) + np.maximum(median_new - X_o.max(axis=0), 0.0)
-        if np.linalg.norm(outside) <= self.cfg.max_point_spread_m:
+        if not always and np.linalg.norm(outside) <= self.cfg.max_point_spread_m:
             return T_w_o_pred
         shift = median_new - np.median(X_o, axis=0)
         T_w_o = T_w_o_pred.copy()
