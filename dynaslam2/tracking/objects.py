@@ -324,24 +324,26 @@ class ObjectTracker:
                 else:
                     held.append(k)
         # Last, the young pedestrian tracks without a velocity, by their gate (a group's pedestrian hidden before its
-        # track had one, crossing s10); then the instances left become new objects.
+        # track had one, crossing s10), then people's tracks lost within max_lost_s by their appearance (re-anchored
+        # on the instance); then the instances left become new objects.
         gated = [k for k in held if enough[k]]
         unseen = [tr for tr in active if tr.track_id not in seen]
-        young = dict(zip(gated, self.boxes.assign(frame, objects, unseen, pred, boxes[gated],
-                                                  [_instance_class(int(inst_ids[k])) for k in gated],
-                                                  [points[k][1] for k in gated], None if hist is None else hist[gated],
-                                                  cfg.join_max_gap_s, ("young",))))
-        lost = [k for k in gated if young[k] is None]
+        late = dict(zip(gated, self.boxes.assign(frame, objects, unseen, pred, boxes[gated],
+                                                 [_instance_class(int(inst_ids[k])) for k in gated],
+                                                 [points[k][1] for k in gated], None if hist is None else hist[gated],
+                                                 cfg.join_max_gap_s, ("young",))))
+        lost = [k for k in gated if late[k] is None]
         reidentified = set()
         if hist is not None and cfg.appearance_reid_distance > 0 and lost:
-            taken = {tr.track_id for tr in young.values() if tr is not None}
-            young.update(zip(lost, self.boxes.assign(frame, objects, [tr for tr in unseen if tr.track_id not in taken],
-                                                     pred, boxes[lost], [_instance_class(int(inst_ids[k])) for k in lost],
-                                                     [points[k][1] for k in lost], hist[lost], cfg.max_lost_s,
-                                                     ("appearance",))))
-            reidentified = {k for k in lost if young[k] is not None}
+            taken = {tr.track_id for tr in late.values() if tr is not None}
+            late.update(zip(lost, self.boxes.assign(frame, objects, [tr for tr in unseen if tr.track_id not in taken],
+                                                    pred, boxes[lost],
+                                                    [_instance_class(int(inst_ids[k])) for k in lost],
+                                                    [points[k][1] for k in lost], hist[lost], cfg.max_lost_s,
+                                                    ("appearance",))))
+            reidentified = {k for k in lost if late[k] is not None}
         for k in held:
-            inst, tr = int(inst_ids[k]), young.get(k)
+            inst, tr = int(inst_ids[k]), late.get(k)
             tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free,
                                   reanchor=k in reidentified)
                    if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
@@ -550,8 +552,8 @@ class ObjectTracker:
         (`_register`; a measurement of its position for the filter, with the registration's information); the
         instance's other close keypoints become its points. Without a registration the observation is the
         prediction; a prediction that has run off (its points would land far from the track's) is re-anchored on
-        the instance first (`_reanchor`). An instance with fewer than min_inliers close keypoints (coasting) adds
-        no points."""
+        the instance first (`_reanchor`; always with `reanchor`: a track re-identified by appearance). An instance
+        with fewer than min_inliers close keypoints (coasting) adds no points."""
         kp, X_w, _ = points
         if len(kp) < self.cfg.min_inliers:
             kp, X_w = kp[:0], X_w[:0]
@@ -691,7 +693,8 @@ class ObjectTracker:
                   always: bool = False) -> np.ndarray:
         """The pose at which a box join adds the instance's points `X_w` to `track`: the prediction, or, when
         their median would lie beyond max_point_spread_m of the box of the track's points (object frame; a
-        prediction run off, e.g. in depth while the object was seen without stereo), the prediction translated
+        prediction run off, e.g. in depth while the object was seen without stereo) or `always` (a track
+        re-identified after up to max_lost_s), the prediction translated
         so that their median lands on the track's median point, with the track's velocity and filter state
         forgotten."""
         X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
