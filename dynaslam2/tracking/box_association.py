@@ -18,7 +18,6 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, transform
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectTrack
-from dynaslam2.tracking.appearance import gallery_distance
 from dynaslam2.tracking.object_filter import initial_speed_sigma, predict_state
 
 
@@ -139,13 +138,14 @@ class BoxAssociation:
         return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
 
     def assign(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
-               boxes: np.ndarray, classes: list[str], X_w: list[np.ndarray], appearance: np.ndarray | None,
+               boxes: np.ndarray, classes: list[str], X_w: list[np.ndarray], looks: dict[int, np.ndarray] | None,
                max_gap_s: float, stages: tuple[str, ...]) -> list[ObjectTrack | None]:
         """The track each instance box of `boxes` (class `classes`) joins, or None: a joint assignment of the boxes
         to the `tracks` of their class observed within `max_gap_s` (measured or box-joined: SORT's max_age counts
         from the newest matched detection) whose predicted box is not passed behind the camera (instance-to-instance
-        association, III-B) and whose appearance gallery holds the instance's colour histogram (`appearance`, (K, B);
-        None: not judged) within appearance_max_distance. SORT's Hungarian assignment (`_hungarian`) in DeepSORT's
+        association, III-B) and whose appearance gallery holds the instance's colour histogram within
+        appearance_max_distance (`looks`: per track id, the (K,) gallery distances of the boxes' instances, NaN not
+        judged; None: appearance off). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's
         cascade of `stages`, each over the boxes and tracks the earlier ones left:
         "moved": by the overlap of each track's last box moved by its predicted image motion (`predicted_box`;
         `_join_overlap` >= join_iou), so that the last box of an object that has left where this one is now cannot
@@ -177,9 +177,8 @@ class BoxAssociation:
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
         open_box = np.all(np.isfinite(boxes), axis=1)
         free = open_box[:, None] & (np.array(classes)[:, None] == np.array([tr.cls for tr in recent])[None])
-        if appearance is not None:
-            for t, tr in enumerate(recent):
-                free[:, t] &= ~(gallery_distance(appearance, tr.appearance) > cfg.appearance_max_distance)
+        if looks is not None:
+            free &= ~(np.array([looks[tr.track_id] for tr in recent]).T > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
         for stage in stages:
             if stage in ("moved", "box"):
@@ -200,8 +199,7 @@ class BoxAssociation:
                     tr, rows = recent[t], np.flatnonzero(free[:, t])
                     if tr.appearance and tr.state_mean is not None:
                         d2 = self._gate_distance(frame, tr, pred[tr.track_id], moved[t], boxes[rows])
-                        cost[rows, t] = np.where(d2 <= cfg.box_gate_chi2,
-                                                 gallery_distance(appearance[rows], tr.appearance), np.inf)
+                        cost[rows, t] = np.where(d2 <= cfg.box_gate_chi2, looks[tr.track_id][rows], np.inf)
                 ok = cost <= cfg.appearance_reid_distance
             elif stage not in ("gate", "young"):
                 raise ValueError(f"unknown box association stage {stage!r}")

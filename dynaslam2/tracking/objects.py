@@ -28,6 +28,7 @@ its colours and the gate (`objects.appearance_reid_distance`). A tentative track
 
 from __future__ import annotations
 
+from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
@@ -255,7 +256,8 @@ class ObjectTracker:
         pred = {tr.track_id: self.predicted_pose(tr, t) for tr in active}
         hist = (instance_histograms(image, instances, inst_ids, cfg.appearance_bins, cfg.appearance_min_pixels)
                 if cfg.appearance_max_distance > 0 and image is not None and instances is not None else None)
-        foreign = self._foreign(active, hist, inst_ids)
+        looks = None if hist is None else {tr.track_id: gallery_distance(hist, tr.appearance) for tr in active}
+        foreign = self._foreign(looks, inst_ids)
         candidates = self._search_projection(frame, objects, [tr for tr in active if tr.velocity_known], pred, dyn)
         for tr in active:
             if tr.track_id not in candidates:
@@ -291,6 +293,14 @@ class ObjectTracker:
         open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
         points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
         enough = {k: len(points[k][0]) >= cfg.min_inliers for k in open_k}
+
+        def assign(tracks: list[ObjectTrack], ks: list[int], max_gap_s: float, stages: tuple[str, ...]
+                   ) -> dict[int, ObjectTrack | None]:
+            """The track each open instance of `ks` joins by `BoxAssociation.assign`."""
+            return dict(zip(ks, self.boxes.assign(
+                frame, objects, tracks, pred, boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
+                [points[k][1] for k in ks], None if looks is None else {tid: d[ks] for tid, d in looks.items()},
+                max_gap_s, stages)))
         held = []  # instances that joined no track in their pass
         for with_enough in ([True, False] if cfg.coast_max_s > 0 else [True]):
             ks = [k for k in open_k if enough[k] == with_enough and inst_ids[k] not in claimed]
@@ -303,13 +313,11 @@ class ObjectTracker:
                     seen.append(tid)
                     claimed.add(inst)
             ks = [k for k in ks if inst_ids[k] not in claimed]
-            joined = self.boxes.assign(frame, objects, [tr for tr in active if tr.track_id not in seen], pred,
-                                       boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
-                                       [points[k][1] for k in ks], None if hist is None else hist[ks],
-                                       cfg.join_max_gap_s if with_enough else cfg.coast_max_s,
-                                       ("moved", "box", "gate", "extent") if with_enough else ("moved", "box"))
-            by_box = {tr.track_id for tr in joined if tr is not None}
-            for k, tr in zip(ks, joined):
+            joined = assign([tr for tr in active if tr.track_id not in seen], ks,
+                            cfg.join_max_gap_s if with_enough else cfg.coast_max_s,
+                            ("moved", "box", "gate", "extent") if with_enough else ("moved", "box"))
+            by_box = {tr.track_id for tr in joined.values() if tr is not None}
+            for k, tr in joined.items():
                 inst = int(inst_ids[k])
                 # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join
                 # when the instance's box touches the voted track's (`BoxAssociation.touches`), e.g. after the box
@@ -328,19 +336,13 @@ class ObjectTracker:
         # on the instance); then the instances left become new objects.
         gated = [k for k in held if enough[k]]
         unseen = [tr for tr in active if tr.track_id not in seen]
-        late = dict(zip(gated, self.boxes.assign(frame, objects, unseen, pred, boxes[gated],
-                                                 [_instance_class(int(inst_ids[k])) for k in gated],
-                                                 [points[k][1] for k in gated], None if hist is None else hist[gated],
-                                                 cfg.join_max_gap_s, ("young",))))
+        late = assign(unseen, gated, cfg.join_max_gap_s, ("young",))
         lost = [k for k in gated if late[k] is None]
         reidentified = set()
-        if hist is not None and cfg.appearance_reid_distance > 0 and lost:
+        if looks is not None and cfg.appearance_reid_distance > 0 and lost:
             taken = {tr.track_id for tr in late.values() if tr is not None}
-            late.update(zip(lost, self.boxes.assign(frame, objects, [tr for tr in unseen if tr.track_id not in taken],
-                                                    pred, boxes[lost],
-                                                    [_instance_class(int(inst_ids[k])) for k in lost],
-                                                    [points[k][1] for k in lost], hist[lost], cfg.max_lost_s,
-                                                    ("appearance",))))
+            late.update(assign([tr for tr in unseen if tr.track_id not in taken], lost, cfg.max_lost_s,
+                               ("appearance",)))
             reidentified = {k for k in lost if late[k] is not None}
         for k in held:
             inst, tr = int(inst_ids[k]), late.get(k)
@@ -501,21 +503,21 @@ class ObjectTracker:
         return [tr for tr in active if tr.track_id not in seen and tr.cls == _instance_class(inst)
                 and inst not in foreign[tr.track_id]]
 
-    def _foreign(self, active: list[ObjectTrack], hist: np.ndarray | None, inst_ids: np.ndarray
-                 ) -> dict[int, set[int]]:
-        """Per active track, the instance ids whose colour histogram (`hist`, rows of `inst_ids`) lies further than
-        appearance_max_distance from every one of its gallery (`gallery_distance`), or further by appearance_margin
-        than from another active track's gallery: not the track's object (its pose claims and votes skip them)."""
-        if hist is None:
-            return {tr.track_id: set() for tr in active}
-        d = np.array([gallery_distance(hist, tr.appearance) for tr in active]).reshape(len(active), len(inst_ids))
+    def _foreign(self, looks: dict[int, np.ndarray] | None, inst_ids: np.ndarray) -> dict[int, set[int]]:
+        """Per active track, the instance ids whose colour histogram lies further than appearance_max_distance
+        from every one of its gallery (`looks`: per track id, the `gallery_distance` of each instance of `inst_ids`),
+        or further by appearance_margin than from another active track's gallery: not the track's object (its pose
+        claims and votes skip them)."""
+        if looks is None:
+            return defaultdict(set)
+        d = np.array(list(looks.values())).reshape(len(looks), len(inst_ids))
         far = d > self.cfg.appearance_max_distance
-        if self.cfg.appearance_margin > 0 and len(active) > 1:
+        if self.cfg.appearance_margin > 0 and len(looks) > 1:
             ds = np.where(np.isnan(d), np.inf, d)
             order = np.sort(ds, axis=0)
             others = np.where(ds == order[0], order[1], order[0])  # the nearest other gallery per (track, instance)
             far |= d > others + self.cfg.appearance_margin
-        return {tr.track_id: set(inst_ids[far[t]].tolist()) for t, tr in enumerate(active)}
+        return {tid: set(inst_ids[far[t]].tolist()) for t, tid in enumerate(looks)}
 
     def _remember_appearance(self, frame: Frame, objects: ObjectMap, seen: list[int], hist: np.ndarray,
                              inst_ids: np.ndarray) -> None:
