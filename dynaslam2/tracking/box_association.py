@@ -4,7 +4,8 @@ the object's predicted motion, `predicted_box`, or by its image velocity, `image
 (the join window counts from the track's newest observation), the frame's instances assigned to the tracks jointly
 (SORT's Hungarian assignment), and, where no box overlaps enough, DeepSORT's Mahalanobis gate on the box centre
 (`objects.box_gate_chi2`), then a vehicle's predicted 3D extent holding the instance's stereo points
-(`objects.extent_min_fraction`), last the gate for the young pedestrian tracks that have no velocity yet."""
+(`objects.extent_min_fraction`), last the gate for the young pedestrian tracks that have no velocity yet. As in
+DeepSORT, the confirmed tracks are matched before the tentative ones, and a person's colours enter the cost."""
 
 from __future__ import annotations
 
@@ -146,12 +147,15 @@ class BoxAssociation:
         association, III-B) and whose appearance gallery holds the instance's colour histogram within
         appearance_max_distance (`looks`: per track id, the (K,) gallery distances of the boxes' instances, NaN not
         judged; None: appearance off). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's
-        cascade of `stages`, each over the boxes and tracks the earlier ones left:
+        cascade of `stages`, each over the boxes and tracks the earlier ones left, first for the confirmed tracks
+        (>= min_output_observations observations), then for the tentative ones (DeepSORT's order: a track begun
+        on an object's partial view a frame ago cannot outbid the object's own track):
         "moved": by the overlap of each track's last box moved by its predicted image motion (`predicted_box`;
         `_join_overlap` >= join_iou), so that the last box of an object that has left where this one is now cannot
-        take it;
+        take it; ranked by the IoU less the gallery distance (DeepSORT's appearance in the cost: a neighbour's box
+        over a person's predicted one does not outbid its own, partly hidden one);
         "box": by that or the overlap of its last box (`_last_box`: a wrong velocity, or a near object whose origin
-        projects off its visible part, moves the box wrong);
+        projects off its visible part, moves the box wrong), ranked alike;
         "gate": by the Mahalanobis distance (`_gate_distance` <= box_gate_chi2) to a velocity-known track whose
         moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
         car passing the camera, a box clipped to the image border);
@@ -177,13 +181,14 @@ class BoxAssociation:
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
         open_box = np.all(np.isfinite(boxes), axis=1)
         free = open_box[:, None] & (np.array(classes)[:, None] == np.array([tr.cls for tr in recent])[None])
-        if looks is not None:
-            free &= ~(np.array([looks[tr.track_id] for tr in recent]).T > cfg.appearance_max_distance)
+        look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
+        free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
+        scored = []
         for stage in stages:
             if stage in ("moved", "box"):
                 iou = iou_moved if stage == "moved" else np.maximum(iou_moved, iou_last)
-                cost, ok = -iou, iou >= cfg.join_iou
+                cost, ok = np.nan_to_num(look) - iou, iou >= cfg.join_iou
             elif stage == "extent":
                 cost = np.zeros(free.shape)
                 if cfg.extent_min_fraction > 0:
@@ -216,10 +221,14 @@ class BoxAssociation:
                 ok = cost <= cfg.box_gate_chi2
             else:
                 continue
-            for k, t in _hungarian(cost, free & ok):
-                joined[k] = recent[t]
-                free[k, :] = False
-                free[:, t] = False
+            scored.append((cost, ok))
+        confirmed = np.array([len(tr.observations) >= cfg.min_output_observations for tr in recent])
+        for group in (confirmed, ~confirmed):
+            for cost, ok in scored:
+                for k, t in _hungarian(cost, free & ok & group[None]):
+                    joined[k] = recent[t]
+                    free[k, :] = False
+                    free[:, t] = False
         return joined
 
     def _extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
