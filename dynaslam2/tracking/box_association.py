@@ -184,24 +184,25 @@ class BoxAssociation:
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
-        scored = []
-        for stage in stages:
+
+        def score(stage: str, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+            """(cost, allowed) of `stage` over the candidate pairs `cand` (K, T); None: the stage is off."""
             if stage in ("moved", "box"):
                 iou = iou_moved if stage == "moved" else np.maximum(iou_moved, iou_last)
                 cost, ok = np.nan_to_num(look) - iou, iou >= cfg.join_iou
             elif stage == "extent":
-                cost = np.zeros(free.shape)
+                cost = np.zeros(cand.shape)
                 if cfg.extent_min_fraction > 0:
-                    for t in np.flatnonzero(free.any(axis=0)):
+                    for t in np.flatnonzero(cand.any(axis=0)):
                         if recent[t].velocity_known and recent[t].cls in VEHICLE_CLASSES:
-                            rows = np.flatnonzero(free[:, t])
+                            rows = np.flatnonzero(cand[:, t])
                             cost[rows, t] = -self._extent_fraction(objects, recent[t], pred[recent[t].track_id],
                                                                    [X_w[k] for k in rows])
                 ok = (cost < 0) & (-cost >= cfg.extent_min_fraction)
             elif stage == "appearance":
-                cost = np.full(free.shape, np.inf)
-                for t in np.flatnonzero(free.any(axis=0)):
-                    tr, rows = recent[t], np.flatnonzero(free[:, t])
+                cost = np.full(cand.shape, np.inf)
+                for t in np.flatnonzero(cand.any(axis=0)):
+                    tr, rows = recent[t], np.flatnonzero(cand[:, t])
                     if tr.appearance and tr.state_mean is not None:
                         d2 = self._gate_distance(frame, tr, pred[tr.track_id], moved[t], boxes[rows])
                         cost[rows, t] = np.where(d2 <= cfg.box_gate_chi2, looks[tr.track_id][rows], np.inf)
@@ -211,24 +212,28 @@ class BoxAssociation:
             elif cfg.box_gate_chi2 > 0 and cfg.filter:
                 young = stage == "young"
                 track_box, overlap = (last, iou_last) if young else (moved, iou_moved)
-                cost = np.full(free.shape, np.inf)
-                for t in np.flatnonzero(free.any(axis=0)):
-                    tr, rows = recent[t], free[:, t] & (overlap[:, t] > 0)
+                cost = np.full(cand.shape, np.inf)
+                for t in np.flatnonzero(cand.any(axis=0)):
+                    tr, rows = recent[t], cand[:, t] & (overlap[:, t] > 0)
                     if rows.any() and tr.state_mean is not None and (
                             not tr.velocity_known and initial_speed_sigma(tr.cls, cfg) < cfg.initial_speed_sigma
                             if young else tr.velocity_known):
                         cost[rows, t] = self._gate_distance(frame, tr, pred[tr.track_id], track_box[t], boxes[rows])
                 ok = cost <= cfg.box_gate_chi2
             else:
-                continue
-            scored.append((cost, ok))
+                return None
+            return cost, ok
+
         confirmed = np.array([len(tr.observations) >= cfg.min_output_observations for tr in recent])
         for group in (confirmed, ~confirmed):
-            for cost, ok in scored:
-                for k, t in _hungarian(cost, free & ok & group[None]):
-                    joined[k] = recent[t]
-                    free[k, :] = False
-                    free[:, t] = False
+            for stage in stages:
+                cand = free & group[None]
+                scored = score(stage, cand)
+                if scored is not None:
+                    for k, t in _hungarian(scored[0], cand & scored[1]):
+                        joined[k] = recent[t]
+                        free[k, :] = False
+                        free[:, t] = False
         return joined
 
     def _extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
