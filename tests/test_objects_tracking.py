@@ -1279,7 +1279,8 @@ def test_a_confirmed_track_gets_its_box_before_a_tentative_one():
     first) gives it to the old track (crossing s51 f62); by stage alone the tentative track took it."""
     rng = np.random.default_rng(3)
     car = Body(rng, 1001, 120, (4.0, 1.5, 1.8))
-    x = [-3.0 + 0.1 * i for i in range(5)] + [None, None, -2.3 + 2.3, -2.2 + 2.3]
+    ahead = 2.3  # metres beyond the constant-velocity prediction once hidden
+    x = [-3.0 + 0.1 * i for i in range(5)] + [None, None, -2.3 + ahead, -2.2 + ahead]
     views = {7: car.part(np.flatnonzero(car.X_b[:, 0] > 0.4), rng=rng), 8: car.part(np.arange(120), rng=rng)}
     objects, trk = ObjectMap(), tracker()
     for i, x_i in enumerate(x):
@@ -1311,6 +1312,9 @@ def test_a_track_takes_the_box_that_looks_like_it_over_a_neighbour_that_overlaps
     beside = passer.part(np.arange(60), rng=rng)
     frame = make_frame(5, [(left_third, at[5]), (beside, at[5] @ make_pose(np.eye(3), np.array([0.15, 0.0, 0.0])))])
     instances, image = painted(frame, colours)
+    if max_distance:  # the passer-by is not vetoed by its colours: the cost decides
+        hist = instance_histograms(image, instances, np.array([2002]), 4, 30)
+        assert 0.25 < gallery_distance(hist, objects.tracks[estimate.track_id].appearance)[0] < max_distance
     trk.track(frame, instances, objects, image)
     assert objects.tracks[estimate.track_id].last.instance_id == (2002 if max_distance == 0 else 2001)
 

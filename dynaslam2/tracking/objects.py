@@ -696,9 +696,8 @@ class ObjectTracker:
         """The pose at which a box join adds the instance's points `X_w` to `track`: the prediction, or, when
         their median would lie beyond max_point_spread_m of the box of the track's points (object frame; a
         prediction run off, e.g. in depth while the object was seen without stereo) or `always` (a track
-        re-identified after up to max_lost_s), the prediction translated
-        so that their median lands on the track's median point, with the track's velocity and filter state
-        forgotten."""
+        re-identified after up to max_lost_s), the prediction translated so that their median lands on the track's
+        median point, with the track's velocity and filter state forgotten."""
         X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
         if not len(X_o):
             return T_w_o_pred
