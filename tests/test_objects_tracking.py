@@ -367,6 +367,36 @@ def test_box_association_ignores_an_instance_that_cannot_take_the_track():
     assert ids == {2009: ped_id}
 
 
+def test_a_mostly_hidden_car_keeps_its_track_from_a_farther_car_on_its_last_box():
+    """Car A (10 m/s, 15 m away) is hidden for a frame but for 4 keypoints (too few to measure it: it coasts)
+    whose box is where its track predicts it; car B, 25 m away and seen whole, lies inside A's last box as it was
+    but not inside its moved box. The moved boxes come first, the coasting instance's too: A keeps its track and
+    its id when it is seen whole again, B starts its own (crossing s47: the farther car took the hidden one's
+    track by its last box while the hidden one waited for the instances with enough keypoints)."""
+    rng = np.random.default_rng(12)
+    a, b = Body(rng, 1001, 80, (4.0, 1.5, 1.5)), Body(rng, 1002, 60, (4.0, 1.5, 1.5))
+    corners = Body(rng, 1001, 4, (4.0, 1.5, 1.5))
+    corners.X_b = np.array([[-2.0, -0.75, -0.75], [2.0, 0.75, -0.75], [-2.0, 0.75, 0.75], [2.0, -0.75, 0.75]])
+    T_a = [make_pose(np.eye(3), np.array([2.0 - 1.0 * i, 0.8, 15.0])) for i in range(7)]
+    objects, trk = ObjectMap(), tracker("objects.filter=false")
+    ids = [[e.track_id for e in trk.track(make_frame(i, [(a, T_a[i])]), None, objects).estimates] for i in range(5)]
+    assert ids == [ids[0]] * 5 and len(ids[0]) == 1
+    tr_a = objects.tracks[ids[0][0]]
+    last = np.asarray(tr_a.last.box2d)
+    T_b = make_pose(np.eye(3), np.array([(last[2] - 207.5) / 400.0 * 25.0 - 1.9, 1.3, 25.0]))  # right end of A's box
+    frame = make_frame(5, [(corners, T_a[5]), (b, T_b)])
+    boxes = keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), np.array([1001, 1002]))
+    moved = trk.boxes.predicted_box(tr_a, frame, trk.predicted_pose(tr_a, frame.timestamp), objects)
+    join_iou = trk.cfg.join_iou
+    overlap = trk.boxes._join_overlap(boxes, np.array([moved, last]))  # rows A, B; columns moved, last box
+    assert overlap[1, 1] >= join_iou > overlap[1, 0] and overlap[0, 0] >= join_iou
+    ids5 = {e.instance_id: e.track_id for e in trk.track(frame, None, objects).estimates}
+    assert 1001 not in ids5 and ids5[1002] != tr_a.track_id  # A coasts (unreported), B starts a track
+    assert tr_a.last.frame_index == 5 and tr_a.last.instance_id == 1001 and not tr_a.last.measured
+    est = trk.track(make_frame(6, [(a, T_a[6]), (b, T_b)]), None, objects).estimates
+    assert {e.instance_id: e.track_id for e in est} == {1001: tr_a.track_id, 1002: ids5[1002]}
+
+
 def test_object_creation_thresholds():
     """An instance creates an object only with min_new_points close keypoints with depth; the object
     frame is the centroid of its points with the identity rotation."""

@@ -140,16 +140,16 @@ class BoxAssociation:
 
     def assign(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
                boxes: np.ndarray, classes: list[str], X_w: list[np.ndarray], looks: dict[int, np.ndarray] | None,
-               max_gap_s: float, stages: tuple[str, ...]) -> list[ObjectTrack | None]:
-        """The track each instance box of `boxes` (class `classes`) joins, or None: a joint assignment of the boxes
-        to the `tracks` of their class observed within `max_gap_s` (measured or box-joined: SORT's max_age counts
-        from the newest matched detection) whose predicted box is not passed behind the camera (instance-to-instance
-        association, III-B) and whose appearance gallery holds the instance's colour histogram within
-        appearance_max_distance (`looks`: per track id, the (K,) gallery distances of the boxes' instances, NaN not
-        judged; None: appearance off). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's
-        cascade of `stages`, each over the boxes and tracks the earlier ones left, first for the confirmed tracks
-        (>= min_output_observations observations), then for the tentative ones (DeepSORT's order: a track begun
-        on an object's partial view a frame ago cannot outbid the object's own track):
+               max_gap_s: np.ndarray, coasting: np.ndarray, stages: tuple[str, ...]) -> list[ObjectTrack | None]:
+        """The track each instance box of `boxes` (class `classes`) joins, or None: a joint assignment of the boxes to
+        the `tracks` of their class observed within each box's `max_gap_s` ((K,) s; measured or box-joined: SORT's
+        max_age counts from the newest matched detection) whose predicted box is not passed behind the camera
+        (instance-to-instance association, III-B) and whose appearance gallery holds the instance's colour histogram
+        within appearance_max_distance (`looks`: per track id, the (K,) gallery distances of the boxes' instances, NaN
+        not judged; None: appearance off). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's cascade of
+        `stages`, each over the boxes and tracks the earlier ones left, first for the confirmed tracks (>=
+        min_output_observations observations), then for the tentative ones (DeepSORT's order: a track begun on an
+        object's partial view a frame ago cannot outbid the object's own track):
         "moved": by the overlap of each track's last box moved by its predicted image motion (`predicted_box`;
         `_join_overlap` >= join_iou), so that the last box of an object that has left where this one is now cannot
         take it; ranked by the IoU less the gallery distance (DeepSORT's appearance in the cost: a neighbour's box
@@ -167,12 +167,16 @@ class BoxAssociation:
         pedestrians) for its filter to start from;
         "appearance": by the distance of the instance's histogram to a person track's gallery (<=
         appearance_reid_distance) within the Mahalanobis gate of its predicted box (re-identification of a track
-        lost beyond the box window)."""
+        lost beyond the box window). A stage named "coast-" + stage is that stage over the `coasting` boxes
+        (instances with too few keypoints to measure a pose or hold points), the others over the rest: an object's
+        mostly hidden instance whose box overlaps the track's moved box keeps it from a farther object's instance
+        that only overlaps its last box (crossing s47), but not from the object's own instance with enough
+        keypoints that overlaps its moved box less than a neighbour's sliver does."""
         cfg = self.cfg
         joined: list[ObjectTrack | None] = [None] * len(boxes)
         if not len(boxes):
             return joined
-        recent = [tr for tr in tracks if frame.timestamp - tr.last.timestamp <= max_gap_s]
+        recent = [tr for tr in tracks if frame.timestamp - tr.last.timestamp <= max_gap_s.max()]
         moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects) for tr in recent]
         recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
         if not recent:
@@ -181,6 +185,7 @@ class BoxAssociation:
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
         open_box = np.all(np.isfinite(boxes), axis=1)
         free = open_box[:, None] & (np.array(classes)[:, None] == np.array([tr.cls for tr in recent])[None])
+        free &= np.array([frame.timestamp - tr.last.timestamp for tr in recent])[None] <= max_gap_s[:, None]
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
@@ -227,8 +232,9 @@ class BoxAssociation:
         confirmed = np.array([len(tr.observations) >= cfg.min_output_observations for tr in recent])
         for group in (confirmed, ~confirmed):
             for stage in stages:
-                cand = free & group[None]
-                scored = score(stage, cand)
+                coast = stage.startswith("coast-")
+                cand = free & group[None] & (coasting if coast else ~coasting)[:, None]
+                scored = score(stage.removeprefix("coast-"), cand)
                 if scored is not None:
                     for k, t in _hungarian(scored[0], cand & scored[1]):
                         joined[k] = recent[t]

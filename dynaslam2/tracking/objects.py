@@ -285,10 +285,10 @@ class ObjectTracker:
                 if p is not None and p.instance_id == best.instance_id:
                     proposals[other] = self._propose(frame, objects, objects.tracks[other], pred[other],
                                                      *candidates[other], free, claimed | foreign[other])
-        # Unclaimed instances: re-appearing objects or new ones, first those with enough close keypoints, then
-        # (coast_max_s) the others. In each pass the point votes go first; the instances left are assigned to the
-        # unseen tracks jointly by their boxes (`BoxAssociation.assign`), so that a mostly hidden neighbour cannot
-        # outbid an object seen whole.
+        # Unclaimed instances: re-appearing objects or new ones. The point votes of those with enough close keypoints
+        # go first; the instances left are assigned to the unseen tracks jointly by their boxes
+        # (`BoxAssociation.assign`), so that a mostly hidden neighbour cannot outbid an object seen whole; an
+        # instance with too few keypoints (it coasts, coast_max_s) comes after those with enough in each stage.
         # (Each instance's points once: an instance only takes its own keypoints out of `free`.)
         open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
         points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
@@ -296,41 +296,40 @@ class ObjectTracker:
 
         def assign(tracks: list[ObjectTrack], ks: list[int], max_gap_s: float, stages: tuple[str, ...]
                    ) -> dict[int, ObjectTrack | None]:
-            """The track each open instance of `ks` joins by `BoxAssociation.assign`."""
+            """The track each open instance of `ks` joins by `BoxAssociation.assign`; an instance without enough
+            keypoints coasts within coast_max_s."""
             return dict(zip(ks, self.boxes.assign(
                 frame, objects, tracks, pred, boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
                 [points[k][1] for k in ks], None if looks is None else {tid: d[ks] for tid, d in looks.items()},
-                max_gap_s, stages)))
-        held = []  # instances that joined no track in their pass
-        for with_enough in ([True, False] if cfg.coast_max_s > 0 else [True]):
-            ks = [k for k in open_k if enough[k] == with_enough and inst_ids[k] not in claimed]
-            voted = {}
-            for k in ks:
-                inst = int(inst_ids[k])
-                tid, voted[k] = self._join_by_vote(frame, objects, self._unseen(active, seen, inst, foreign), pred,
-                                                   inst, points[k], boxes[k], free)
-                if tid is not None:
-                    seen.append(tid)
-                    claimed.add(inst)
-            ks = [k for k in ks if inst_ids[k] not in claimed]
-            joined = assign([tr for tr in active if tr.track_id not in seen], ks,
-                            cfg.join_max_gap_s if with_enough else cfg.coast_max_s,
-                            ("moved", "box", "gate", "extent") if with_enough else ("moved", "box"))
-            by_box = {tr.track_id for tr in joined.values() if tr is not None}
-            for k, tr in joined.items():
-                inst = int(inst_ids[k])
-                # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join
-                # when the instance's box touches the voted track's (`BoxAssociation.touches`), e.g. after the box
-                # join's window lapsed.
-                vote = voted[k]
-                if (tr is None and vote is not None and vote.track_id not in seen and vote.track_id not in by_box
-                        and self.boxes.touches(frame, objects, vote, pred[vote.track_id], boxes[k])):
-                    tr = vote
-                if tr is not None:
-                    seen.append(self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free))
-                    claimed.add(inst)
-                else:
-                    held.append(k)
+                np.array([max_gap_s if enough[k] else cfg.coast_max_s for k in ks]),
+                np.array([not enough[k] for k in ks], dtype=bool), stages)))
+        voted = {}
+        for k in open_k:
+            inst = int(inst_ids[k])
+            tid, voted[k] = self._join_by_vote(frame, objects, self._unseen(active, seen, inst, foreign), pred,
+                                               inst, points[k], boxes[k], free)
+            if tid is not None:
+                seen.append(tid)
+                claimed.add(inst)
+        ks = [k for k in open_k if inst_ids[k] not in claimed and (enough[k] or cfg.coast_max_s > 0)]
+        joined = assign([tr for tr in active if tr.track_id not in seen], ks, cfg.join_max_gap_s,
+                        ("moved", "coast-moved", "box", "gate", "extent", "coast-box"))
+        by_box = {tr.track_id for tr in joined.values() if tr is not None}
+        held = []  # instances that joined no track
+        for k, tr in joined.items():
+            inst = int(inst_ids[k])
+            # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join
+            # when the instance's box touches the voted track's (`BoxAssociation.touches`), e.g. after the box
+            # join's window lapsed.
+            vote = voted[k]
+            if (tr is None and vote is not None and vote.track_id not in seen and vote.track_id not in by_box
+                    and self.boxes.touches(frame, objects, vote, pred[vote.track_id], boxes[k])):
+                tr = vote
+            if tr is not None:
+                seen.append(self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free))
+                claimed.add(inst)
+            else:
+                held.append(k)
         # Last, the young pedestrian tracks without a velocity, by their gate (a group's pedestrian hidden before its
         # track had one, crossing s10), then people's tracks lost within max_lost_s by their appearance (re-anchored
         # on the instance); then the instances left become new objects.
