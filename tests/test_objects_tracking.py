@@ -350,8 +350,8 @@ def test_box_association_ignores_an_instance_that_cannot_take_the_track():
     pedestrian, its appearance changed (no descriptor matches) and a little off its prediction, keeps its
     track id through the box join. (A mutual-best test counted the hidden one's box, which overlaps the
     track more, and the first pedestrian started a new track every frame: crossing s2's pedestrians 24/25. With
-    objects.coast_max_s the hidden one, taken first, coasted on the track: instances with enough keypoints now join
-    first, among themselves.)"""
+    objects.coast_max_s the hidden one, taken first, coasted on the track: in each box stage the instances with
+    enough keypoints now come first, among themselves.)"""
     rng = np.random.default_rng(8)
     ped = Body(rng, 2005, 60, (0.6, 1.7, 0.4))
     objects, trk = ObjectMap(), tracker()
