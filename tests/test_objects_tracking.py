@@ -383,7 +383,8 @@ def test_a_mostly_hidden_car_keeps_its_track_from_a_farther_car_on_its_last_box(
     assert ids == [ids[0]] * 5 and len(ids[0]) == 1
     tr_a = objects.tracks[ids[0][0]]
     last = np.asarray(tr_a.last.box2d)
-    T_b = make_pose(np.eye(3), np.array([(last[2] - 207.5) / 400.0 * 25.0 - 1.9, 1.3, 25.0]))  # right end of A's box
+    x_right = (last[2] - CAMERA.cx) / CAMERA.fx * 25.0  # A's box's right edge at 25 m
+    T_b = make_pose(np.eye(3), np.array([x_right - 1.9, 1.3, 25.0]))
     frame = make_frame(5, [(corners, T_a[5]), (b, T_b)])
     boxes = keypoint_boxes(frame, np.ones(len(frame.keypoints), bool), np.array([1001, 1002]))
     moved = trk.boxes.predicted_box(tr_a, frame, trk.predicted_pose(tr_a, frame.timestamp), objects)

@@ -304,14 +304,14 @@ class ObjectTracker:
                 np.array([max_gap_s if enough[k] else cfg.coast_max_s for k in ks]),
                 np.array([not enough[k] for k in ks], dtype=bool), stages)))
         voted = {}
-        for k in open_k:
+        for k in (k for k in open_k if enough[k]):  # a vote needs min_inliers close keypoints (`_join_by_vote`)
             inst = int(inst_ids[k])
             tid, voted[k] = self._join_by_vote(frame, objects, self._unseen(active, seen, inst, foreign), pred,
                                                inst, points[k], boxes[k], free)
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
-        ks = [k for k in open_k if inst_ids[k] not in claimed and (enough[k] or cfg.coast_max_s > 0)]
+        ks = [k for k in open_k if inst_ids[k] not in claimed]
         joined = assign([tr for tr in active if tr.track_id not in seen], ks, cfg.join_max_gap_s,
                         ("moved", "coast-moved", "box", "gate", "extent", "coast-box"))
         by_box = {tr.track_id for tr in joined.values() if tr is not None}
@@ -321,7 +321,7 @@ class ObjectTracker:
             # A vote whose pose fails (points made far away do not fit one rigid pose) joins like a box join
             # when the instance's box touches the voted track's (`BoxAssociation.touches`), e.g. after the box
             # join's window lapsed.
-            vote = voted[k]
+            vote = voted.get(k)
             if (tr is None and vote is not None and vote.track_id not in seen and vote.track_id not in by_box
                     and self.boxes.touches(frame, objects, vote, pred[vote.track_id], boxes[k])):
                 tr = vote
