@@ -19,7 +19,7 @@ from dynaslam2.map.objects import ObjectMap
 from dynaslam2.mapping.objects import object_local_ba
 from dynaslam2.mapping.local_mapping import LocalMapper
 from dynaslam2.tracking.camera import CameraTracker, rigid
-from dynaslam2.tracking.frontend import FrameBuilder
+from dynaslam2.tracking.frontend import FrameBuilder, uses_depth_image
 from dynaslam2.tracking.objects import ObjectTracker
 from dynaslam2.tracking.relocalization import relocalize
 
@@ -205,7 +205,9 @@ class System:
         if self.object_tracker is None:
             return []
         t0 = time.perf_counter()
-        weak = self.object_tracker.track(frame, data.instances, self.objects, data.left).weak
+        rgbd = uses_depth_image(data, self.config)
+        weak = self.object_tracker.track(frame, data.instances, self.objects, data.left,
+                                         None if rgbd else data.right, data.depth if rgbd else None).weak
         timing["objects"] = (time.perf_counter() - t0) * 1e3
         return weak
 

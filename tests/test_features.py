@@ -24,9 +24,10 @@ from dynaslam2.features import (
 )
 from dynaslam2.features.matcher import _pairs_in_radius, rotation_consistent
 from dynaslam2.features.orb import base_to_level, level_scales, level_to_base
-from dynaslam2.features.stereo import search_stereo_rows
+from dynaslam2.features.stereo import instance_disparities, search_stereo_rows
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.io.types import FrameData
+from dynaslam2.tracking.box_association import instance_boxes
 from dynaslam2.tracking.frontend import FrameBuilder
 
 KITTI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "kitti-odometry-06"
@@ -701,3 +702,30 @@ def test_dynamic_frames_give_narrow_objects_their_own_depth(instance_sad):
     correct = np.abs(frame.depth[on] - 6.0) < 0.2
     assert on.sum() > 100
     assert (np.mean(correct) > 0.35 if instance_sad else np.mean(correct) < 0.2), np.mean(correct)  # 0.50 / 0.08
+
+
+@pytest.mark.parametrize("d_obj", [11.3, 15.0])
+def test_instance_disparities_match_each_mask_as_a_whole(d_obj):
+    """Narrow objects (7 px wide: few keypoints each) before a background at another disparity: each instance's
+    mask matched as a whole along its rows gives the object's disparity, sub-pixel, not the background's."""
+    left, right, labels = _narrow_objects_pair(d_obj=d_obj)
+    ids = np.unique(labels[labels > 0])
+    d = instance_disparities(left, right, labels, ids, instance_boxes(labels, ids), 2.0, 40.0, 0.5, 0.8)
+    assert len(ids) >= 8
+    np.testing.assert_allclose(d, d_obj, atol=0.15)
+
+
+def test_instance_disparities_reject_a_repeated_texture():
+    """A texture repeating along the row every 9 px fits several disparities equally: no disparity (uniqueness);
+    the same mask on a random texture gets one."""
+    rng = np.random.default_rng(1)
+    period = np.clip(rng.normal(128, 60, (240, 9)), 0, 255)
+    img = np.tile(period, (1, 36))[:, :320].astype(np.uint8)
+    labels = np.zeros(img.shape, np.int32)
+    labels[60:180, 150:170] = 2001
+    ids = np.array([2001])
+    assert instance_disparities(img, img, labels, ids, instance_boxes(labels, ids), 2.0, 40.0, 0.5, 0.8)[0] == -1
+    left, right = _shifted_pair(12.5)
+    np.testing.assert_allclose(
+        instance_disparities(left, right, labels, ids, instance_boxes(labels, ids), 2.0, 40.0, 0.5, 0.8), 12.5,
+        atol=0.15)

@@ -11,12 +11,13 @@ from dynaslam2.config import load_config
 from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.orb import Keypoints
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp, so3_log
+from dynaslam2.geometry.se3 import inverse, make_pose, so3_exp, so3_log, transform
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import motion_increment
 from dynaslam2.tracking.appearance import gallery_distance, instance_histograms
-from dynaslam2.tracking.box_association import _hungarian, keypoint_boxes
+from dynaslam2.tracking.box_association import _hungarian, instance_boxes, keypoint_boxes
+from dynaslam2.tracking.mask_measurement import MaskMeasurement
 from dynaslam2.tracking.object_filter import filter_position
 from dynaslam2.tracking.objects import ObjectTracker, PoseProposal, first_claim, rigid_fit
 
@@ -1374,3 +1375,68 @@ def test_a_person_lost_beyond_the_box_window_is_reidentified_by_appearance(reid_
     instances, image = painted(frame, colours)
     trk.track(frame, instances, objects, image)
     assert (objects.tracks[first].last.instance_id == 2002) == same_track
+
+
+def rendered_masks(bodies: list[tuple[Body, np.ndarray]], T_c_w: np.ndarray = np.eye(4),
+                   depth_error_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(instances, depth image) of an RGB-D view of `bodies` (body, T_w_b): each body's mask the image rectangle of
+    its points' bounding box, at the depth of its frame's origin (+ `depth_error_m`); the nearer body on top."""
+    instances = np.zeros((CAMERA.height, CAMERA.width), np.int32)
+    depth = np.zeros(instances.shape, np.float32)
+    order = sorted(bodies, key=lambda b: -(T_c_w @ b[1])[2, 3])
+    for body, T_w_b in order:
+        lo, hi = body.X_b.min(axis=0), body.X_b.max(axis=0)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        uv = CAMERA.project(transform(T_c_w @ T_w_b, corners))
+        (u0, v0), (u1, v1) = np.clip(np.rint(uv.min(0)), 0, None).astype(int), np.rint(uv.max(0)).astype(int)
+        instances[v0:v1 + 1, u0:u1 + 1] = body.inst
+        depth[v0:v1 + 1, u0:u1 + 1] = (T_c_w @ T_w_b)[2, 3] + depth_error_m
+    return instances, depth
+
+
+def test_mask_measurement_moves_a_wrong_prediction_onto_the_mask():
+    """A pedestrian's points predicted 0.4 m to the side and 1.5 m too far: the mask's centroid at the mask's depth
+    against the points predicted inside it measures the true position (within 5 cm); its depth sigma is
+    mask_disparity_sigma_px's at 15 m (0.34 m), looser than across the ray (0.15 x a 16 px wide mask: 0.09 m)."""
+    rng = np.random.default_rng(3)
+    person = Body(rng, 2001, 40, (0.6, 1.7, 0.5))
+    T_true = make_pose(np.eye(3), np.array([1.0, 0.5, 15.0]))
+    T_pred = make_pose(np.eye(3), np.array([1.4, 0.5, 16.5]))
+    instances, depth = rendered_masks([(person, T_true)])
+    frame = make_frame(0, [])
+    cfg = load_config(None, ["mode=dynamic"])
+    masks = MaskMeasurement(cfg.objects, cfg.stereo, CAMERA, instances, np.zeros(instances.shape, np.uint8), None,
+                            depth)
+    (box,) = instance_boxes(instances, np.array([2001]))
+    p_w, info = masks.position(frame, T_pred, person.X_b, 2001, box, 3)
+    np.testing.assert_allclose(p_w, T_true[:3, 3], atol=0.05)
+    cov = np.linalg.inv(info)
+    np.testing.assert_allclose(np.sqrt(cov[2, 2]), 15.0**2 / CAMERA.bf * cfg.objects.mask_disparity_sigma_px)
+    assert cov[0, 0] < cov[2, 2], np.diag(cov)
+
+
+@pytest.mark.parametrize("depth_error_m", [0.0, 6.0])
+def test_a_coasting_track_is_measured_by_its_mask(depth_error_m):
+    """For two frames a walking pedestrian's instance carries 2 keypoints (too few for a pose): its mask measures
+    the track (objects.mask_measurement), which is reported there as measured, on the person; a mask depth 6 m off
+    fails the validation gate (mask_gate_nis): the track coasts unreported, as without the mask."""
+    rng = np.random.default_rng(6)
+    person = Body(rng, 2001, 40, (0.6, 1.7, 0.5))
+    few = person.part(np.arange(2))
+    T = [make_pose(np.eye(3), np.array([-1.0 + 0.14 * i, 0.5, 12.0])) for i in range(8)]
+    objects, trk = ObjectMap(), tracker()
+    image = np.zeros((CAMERA.height, CAMERA.width), np.uint8)
+    ids = []
+    for i in range(8):
+        instances, depth = rendered_masks([(person, T[i])], depth_error_m=depth_error_m if i in (5, 6) else 0.0)
+        body = few if i in (5, 6) else person
+        ids.append([e.track_id for e in trk.track(make_frame(i, [(body, T[i])]), instances, objects, image,
+                                                  depth_image=depth).estimates])
+    (tr,) = objects.tracks.values()
+    assert all(x == [tr.track_id] for k, x in enumerate(ids) if k not in (5, 6))
+    measured = depth_error_m == 0.0
+    assert [o.measured for o in tr.observations] == [i not in (5, 6) or measured for i in range(8)]
+    assert ids[5] == ids[6] == ([tr.track_id] if measured else [])
+    T_off = inverse(T[0]) @ tr.observations[0].T_w_o
+    for obs in tr.observations:
+        assert np.linalg.norm(obs.T_w_o[:3, 3] - (T[obs.frame_index] @ T_off)[:3, 3]) < 0.1

@@ -360,3 +360,41 @@ def depth_from_image(kp_left: Keypoints, depth: np.ndarray, camera: StereoCamera
     z = np.where(valid, d, -1.0).astype(np.float32)
     u_r = np.where(valid, kp_left.uv[:, 0] - camera.bf / np.where(valid, d, 1.0), -1.0).astype(np.float32)
     return u_r, z
+
+
+def instance_disparities(gray_l: np.ndarray, gray_r: np.ndarray, instances: np.ndarray, ids: np.ndarray,
+                         boxes: np.ndarray, d_min: float, d_max: float, min_ncc: float, uniqueness: float
+                         ) -> np.ndarray:
+    """(K,) disparity (px, level 0) of each instance `ids[k]` as a whole: its left mask (box `boxes[k]`: left,
+    top, right, bottom) matched along its rows of the right image by normalized cross-correlation on the mask's
+    pixels only (`cv2.matchTemplate`, TM_CCOEFF_NORMED with the mask), disparities d_min..d_max, with a
+    parabola through the peak and its neighbours. -1 where the peak lies at the border of the search, its NCC is
+    below `min_ncc`, or (1 - peak) is not below `uniqueness` x (1 - the best NCC more than 1 px away). A
+    measurement that needs no keypoints: the instance's pixels all take part (a small or hidden object)."""
+    out = np.full(len(ids), -1.0)
+    width = gray_l.shape[1]
+    for k, (inst, box) in enumerate(zip(np.asarray(ids).tolist(), boxes)):
+        if not np.all(np.isfinite(box)):
+            continue
+        x0, y0, x1, y1 = (int(b) for b in box)
+        lo, hi = max(int(np.floor(d_min)) - 1, 0), min(int(np.ceil(d_max)) + 1, x0)
+        if hi - lo < 2 or x1 - x0 < 1 or y1 - y0 < 1:
+            continue
+        mask = (instances[y0:y1 + 1, x0:x1 + 1] == inst).astype(np.float32)
+        templ = gray_l[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
+        strip = gray_r[y0:y1 + 1, x0 - hi:min(x1 - lo + 1, width)].astype(np.float32)
+        if strip.shape[1] < templ.shape[1] + 2:
+            continue
+        ncc = cv2.matchTemplate(strip, templ, cv2.TM_CCOEFF_NORMED, mask=mask)[0][::-1]  # j: disparity hi - n + 1 + j
+        ncc = np.where(np.isfinite(ncc), ncc, -1.0)
+        j = int(np.argmax(ncc))
+        if j == 0 or j == len(ncc) - 1 or ncc[j] < min_ncc:
+            continue
+        away = np.r_[ncc[:j - 1], ncc[j + 2:]]
+        if len(away) and (1.0 - ncc[j]) >= uniqueness * (1.0 - away.max()):
+            continue
+        c1, c2, c3 = ncc[j - 1], ncc[j], ncc[j + 1]
+        denom = c1 + c3 - 2.0 * c2
+        delta = 0.5 * (c1 - c3) / denom if denom < 0 else 0.0
+        out[k] = hi - len(ncc) + 1 + j + delta
+    return out

@@ -28,6 +28,11 @@ def dynamic_mask(instances: np.ndarray) -> np.ndarray:
     return dynamic[cls]
 
 
+def uses_depth_image(data: FrameData, config: SlamConfig) -> bool:
+    """Whether depth comes from `data`'s depth image (RGB-D) rather than stereo matching."""
+    return data.depth is not None and (data.right is None or config.tracking.use_depth_image)
+
+
 def dilate_mask(mask: np.ndarray, dilation_px: int) -> np.ndarray:
     """HxW bool `mask` dilated by `dilation_px` (DynaSLAM's mask of the dynamic instances)."""
     if dilation_px <= 0 or not mask.any():
@@ -123,7 +128,7 @@ class FrameBuilder:
         # dynamic with objects.n_features: the same, then a pass with its own budget on the instances.
         separate = mode == "dynamic" and self.config.objects.n_features > 0
         mask = ~dyn if (dyn is not None and (mode == "masked" or separate)) else None
-        use_depth = data.depth is not None and (data.right is None or self.config.tracking.use_depth_image)
+        use_depth = uses_depth_image(data, self.config)
         if use_depth:
             kp = self.extractor.extract(pyr_l, mask=mask)
         else:  # left and right concurrently with orb.threads > 1 (ORB-SLAM2 extracts them in two threads)

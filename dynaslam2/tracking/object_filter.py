@@ -100,11 +100,13 @@ def filter_rotation(track: ObjectTrack, dt: float, R_meas: np.ndarray, rot_cov: 
 
 
 def gated(track: ObjectTrack, dt: float, p_w: np.ndarray, information: Callable[[], np.ndarray],
-          cfg: ObjectsConfig) -> bool:
-    """Validation gate (with the filter and a finite gate_nis): True when the filter's prediction `dt` ahead cannot
-    explain position `p_w` of (3, 3) information `information()` (an association outlier)."""
-    if not (cfg.filter and track.state_mean is not None and np.isfinite(cfg.gate_nis)):
+          cfg: ObjectsConfig, nis: float | None = None) -> bool:
+    """Validation gate (with the filter and a finite threshold `nis`, gate_nis by default): True when the filter's
+    prediction `dt` ahead cannot explain position `p_w` of (3, 3) information `information()` (an association
+    outlier)."""
+    nis = cfg.gate_nis if nis is None else nis
+    if not (cfg.filter and track.state_mean is not None and np.isfinite(nis)):
         return False
     m, P = predict_state(track, dt, cfg)
     y = p_w - m[:3]
-    return float(y @ np.linalg.solve(P[:3, :3] + position_noise(information(), cfg), y)) > cfg.gate_nis
+    return float(y @ np.linalg.solve(P[:3, :3] + position_noise(information(), cfg), y)) > nis

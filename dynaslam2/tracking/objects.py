@@ -45,6 +45,7 @@ from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, predict_object_pose
 from dynaslam2.tracking.appearance import gallery_distance, instance_histograms
 from dynaslam2.tracking.box_association import BoxAssociation, instance_boxes, keypoint_boxes
+from dynaslam2.tracking.mask_measurement import MaskMeasurement
 from dynaslam2.tracking.object_filter import capped_angular_velocity, filter_position, filter_rotation, gated
 
 DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
@@ -239,16 +240,22 @@ class ObjectTracker:
         return T_w_o, inliers
 
     # ------------------------------------------------------------------ main
-    def track(self, frame: Frame, instances: np.ndarray | None, objects: ObjectMap,
-              image: np.ndarray | None = None) -> ObjectFrameResult:
+    def track(self, frame: Frame, instances: np.ndarray | None, objects: ObjectMap, image: np.ndarray | None = None,
+              right: np.ndarray | None = None, depth_image: np.ndarray | None = None) -> ObjectFrameResult:
         """Track the objects of `frame` (camera pose already estimated), create new ones; see the
         module docstring for the order of the steps. `image` (the left image, with `instances`): the
-        instances' appearance (objects.appearance_max_distance)."""
+        instances' appearance (objects.appearance_max_distance); with the `right` image (stereo) or the
+        `depth_image` (RGB-D) too, the coasting instances' mask measurements (objects.mask_measurement)."""
         cfg = self.cfg
         t = frame.timestamp
         dyn = dynamic_keypoints(frame)
         free = dyn.copy()  # dynamic keypoints not yet given to an object
         inst_ids = np.unique(frame.instance_id[dyn])
+        masks = None
+        if cfg.mask_measurement and instances is not None and image is not None and (
+                right is not None or depth_image is not None):
+            masks = MaskMeasurement(cfg, self.config.stereo, self.camera, instances, image, right, depth_image)
+            inst_ids = np.union1d(inst_ids, masks.instance_ids(DYNAMIC_CLASS_IDS))
         boxes = (instance_boxes(instances, inst_ids) if instances is not None
                  else keypoint_boxes(frame, dyn, inst_ids))
         active = [tr for tr in objects.tracks.values()
@@ -326,7 +333,8 @@ class ObjectTracker:
                     and self.boxes.touches(frame, objects, vote, pred[vote.track_id], boxes[k])):
                 tr = vote
             if tr is not None:
-                seen.append(self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free))
+                seen.append(self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free,
+                                           masks))
                 claimed.add(inst)
             else:
                 held.append(k)
@@ -345,7 +353,7 @@ class ObjectTracker:
             reidentified = {k for k in lost if late[k] is not None}
         for k in held:
             inst, tr = int(inst_ids[k]), late.get(k)
-            tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free,
+            tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
                                   reanchor=k in reidentified)
                    if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
             if tid is not None:
@@ -547,18 +555,21 @@ class ObjectTracker:
 
     def _box_join(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, inst: int,
                   points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray,
-                  reanchor: bool = False) -> int:
+                  masks: MaskMeasurement | None = None, reanchor: bool = False) -> int:
         """The instance joins `track` by its box (`BoxAssociation.assign`): the track goes on at its
         constant-velocity prediction, translated by the registration on the keypoints that match its points
         (`_register`; a measurement of its position for the filter, with the registration's information); the
         instance's other close keypoints become its points. Without a registration the observation is the
         prediction; a prediction that has run off (its points would land far from the track's) is re-anchored on
         the instance first (`_reanchor`; always with `reanchor`: a track re-identified by appearance). An instance
-        with fewer than min_inliers close keypoints (coasting) adds no points."""
+        with fewer than min_inliers close keypoints (coasting) adds no points; its mask measures the track's position
+        instead when it can (`masks`, `_mask_register`)."""
         kp, X_w, _ = points
         if len(kp) < self.cfg.min_inliers:
             kp, X_w = kp[:0], X_w[:0]
-        T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
+            T_w_o, kp_in, pt_in, info = self._mask_register(frame, objects, track, T_w_o_pred, masks, inst, box)
+        else:
+            T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
         if not len(kp_in) and len(kp):
             T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
         rest = ~np.isin(kp, kp_in)
@@ -674,6 +685,27 @@ class ObjectTracker:
         if gated(track, frame.timestamp - track.last.timestamp, T_w_o[:3, 3], lambda: info, cfg):
             return T_w_o_pred, none, none, None
         return T_w_o, kp_m[inl], pt_m[inl], info
+
+    def _mask_register(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                       masks: MaskMeasurement | None, inst: int, box: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """`_register` for a coasting instance: the predicted pose of `track` translated to the position its mask
+        measures (`MaskMeasurement.position`, >= register_min_matches of the track's points predicted inside it),
+        no matched points, and the measurement's information, when the position filter's validation gate at
+        mask_gate_nis passes (a mask's disparity can take a wrong peak: one found 5 m for a person at 22 m); else
+        the prediction, no match and None (also without the filter's state)."""
+        cfg = self.cfg
+        none = np.zeros(0, np.int64)
+        if masks is None or not cfg.filter or track.state_mean is None:
+            return T_w_o_pred, none, none, None
+        X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
+        measured = masks.position(frame, T_w_o_pred, X_o, inst, box, cfg.register_min_matches)
+        if measured is None or gated(track, frame.timestamp - track.last.timestamp, measured[0],
+                                     lambda: measured[1], cfg, cfg.mask_gate_nis):
+            return T_w_o_pred, none, none, None
+        T_w_o = T_w_o_pred.copy()
+        T_w_o[:3, 3] = measured[0]
+        return T_w_o, none, none, measured[1]
 
     def _offset_information(self, frame: Frame, objects: ObjectMap, kp: np.ndarray, pts: np.ndarray,
                             X_w: np.ndarray) -> np.ndarray:
