@@ -677,6 +677,9 @@ class ObjectsConfig:
     mask_disparity_sigma_px: float = 0.3  # the disparity's sigma in the position measurement
     mask_centroid_sigma: float = 0.15  # the centroid's sigma per image axis, as a fraction of the mask box's size
     mask_gate_nis: float = 11.34  # a mask measurement's validation gate (chi2, 3 dof, 99 %) against the filter
+    # An instance too small for an object by its keypoints (min_new_points) creates one at its mask's centroid and
+    # depth (its few close keypoints its points), which its mask then measures.
+    mask_creates: bool = True
     # Tracks unseen for longer than this are no longer matched (occlusions up to it keep the id).
     max_lost_s: float = 2.0
     # Velocity known (prediction (a) used) only if the last two observations are this close in time.

@@ -59,37 +59,64 @@ class MaskMeasurement:
             z = cam.bf / d if d > 0 else -1.0
         return z if 0 < z <= cfg.max_point_depth_m else None
 
+    def centroid(self, frame: Frame, inst: int, box: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """(world point (3,), its (3, 3) information) of instance `inst`'s mask centroid at the mask's depth
+        (`_centroid`), or None without a depth: where a track begun on the mask puts its origin."""
+        z_m = self.depth(inst, box)
+        if z_m is None:
+            return None
+        c_m = self._centroid(inst, box)
+        T_w_c = np.linalg.inv(frame.T_c_w)
+        return transform(T_w_c, _backproject(self.camera, c_m, z_m)[None])[0], self._information(frame, c_m, z_m, box)
+
     def position(self, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray, inst: int, box: np.ndarray,
                  min_points: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(measured position of the object-frame origin (3,), its (3, 3) world information) from instance `inst`
         (box `box`) for an object of points `X_o` (object frame) predicted at `T_w_o_pred`: the predicted position
         moved by the offset between the mask's centroid at the mask's depth and the mean pixel, at the median
         depth, of the points predicted inside the mask (iterated: the points inside the mask once the prediction's
-        image offset is applied, 3 times), when >= `min_points` of them lie inside. Variances: the centroid
+        image offset is applied, 3 times), when >= `min_points` of them lie inside; an object of fewer than
+        `min_points` points (begun on its mask) compares its origin instead. Variances: the centroid
         mask_centroid_sigma x the box size per axis, the disparity mask_disparity_sigma_px. None without a depth or
         with too few points inside."""
-        cfg, cam = self.cfg, self.camera
+        cam = self.camera
         z_m = self.depth(inst, box)
-        if z_m is None or not len(X_o):
+        if z_m is None:
             return None
+        c_m = self._centroid(inst, box)
+        X_c = transform(frame.T_c_w @ T_w_o_pred, X_o if len(X_o) >= min_points else np.zeros((1, 3)))
+        X_c = X_c[X_c[:, 2] > 1e-3]
+        if not len(X_c):
+            return None
+        uv = cam.project(X_c)
+        if len(X_o) >= min_points:
+            shift = np.zeros(2)
+            for _ in range(3):
+                p = np.rint(uv + shift).astype(np.int64)
+                ok = (p[:, 0] >= 0) & (p[:, 0] < cam.width) & (p[:, 1] >= 0) & (p[:, 1] < cam.height)
+                inside = np.zeros(len(p), bool)
+                inside[ok] = self.instances[p[ok, 1], p[ok, 0]] == inst
+                if np.count_nonzero(inside) < min_points:
+                    return None
+                c_p = uv[inside].mean(axis=0)
+                shift = c_m - c_p
+            z_p = float(np.median(X_c[inside, 2]))
+        else:
+            c_p, z_p = uv[0], float(X_c[0, 2])
+        offset_c = _backproject(cam, c_m, z_m) - _backproject(cam, c_p, z_p)
+        return T_w_o_pred[:3, 3] + frame.T_c_w[:3, :3].T @ offset_c, self._information(frame, c_m, z_m, box)
+
+    def _centroid(self, inst: int, box: np.ndarray) -> np.ndarray:
+        """Mean pixel (u, v) of instance `inst`'s mask (box `box`)."""
         x0, y0, x1, y1 = (int(b) for b in box)
         rows, cols = np.nonzero(self.instances[y0:y1 + 1, x0:x1 + 1] == inst)
-        c_m = np.array([cols.mean() + x0, rows.mean() + y0])
-        X_c = transform(frame.T_c_w @ T_w_o_pred, X_o)
-        X_c = X_c[X_c[:, 2] > 1e-3]
-        uv = cam.project(X_c)
-        shift = np.zeros(2)
-        for _ in range(3):
-            p = np.rint(uv + shift).astype(np.int64)
-            ok = (p[:, 0] >= 0) & (p[:, 0] < cam.width) & (p[:, 1] >= 0) & (p[:, 1] < cam.height)
-            inside = np.zeros(len(p), bool)
-            inside[ok] = self.instances[p[ok, 1], p[ok, 0]] == inst
-            if np.count_nonzero(inside) < min_points:
-                return None
-            c_p = uv[inside].mean(axis=0)
-            shift = c_m - c_p
-        z_p = float(np.median(X_c[inside, 2]))
-        offset_c = _backproject(cam, c_m, z_m) - _backproject(cam, c_p, z_p)
+        return np.array([cols.mean() + x0, rows.mean() + y0])
+
+    def _information(self, frame: Frame, c_m: np.ndarray, z_m: float, box: np.ndarray) -> np.ndarray:
+        """(3, 3) world information of a point at mask centroid `c_m` and mask depth `z_m`: the centroid's sigma
+        mask_centroid_sigma x the box size per image axis, the depth's from mask_disparity_sigma_px."""
+        cfg, cam = self.cfg, self.camera
+        x0, y0, x1, y1 = box
         sigma_uv = np.maximum(cfg.mask_centroid_sigma * np.array([x1 - x0 + 1, y1 - y0 + 1]), 1.0)
         sigma_z = z_m**2 / cam.bf * cfg.mask_disparity_sigma_px
         J = np.array([[z_m / cam.fx, 0.0, (c_m[0] - cam.cx) / cam.fx],
@@ -97,7 +124,7 @@ class MaskMeasurement:
                       [0.0, 0.0, 1.0]])  # d(x, y, z) / d(u, v, z)
         cov_c = J @ np.diag([*sigma_uv**2, sigma_z**2]) @ J.T
         R_w_c = frame.T_c_w[:3, :3].T
-        return T_w_o_pred[:3, 3] + R_w_c @ offset_c, R_w_c @ np.linalg.inv(cov_c) @ R_w_c.T
+        return R_w_c @ np.linalg.inv(cov_c) @ R_w_c.T
 
 
 def _backproject(camera: StereoCamera, uv: np.ndarray, z: float) -> np.ndarray:

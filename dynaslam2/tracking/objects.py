@@ -355,7 +355,7 @@ class ObjectTracker:
             inst, tr = int(inst_ids[k]), late.get(k)
             tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
                                   reanchor=k in reidentified)
-                   if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
+                   if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free, masks))
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
@@ -581,19 +581,25 @@ class ObjectTracker:
         return track.track_id
 
     def _create(self, frame: Frame, objects: ObjectMap, inst: int, points: tuple[np.ndarray, np.ndarray, int],
-                box: np.ndarray, free: np.ndarray) -> int | None:
+                box: np.ndarray, free: np.ndarray, masks: MaskMeasurement | None = None) -> int | None:
         """With >= min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
         small_new_fraction of its keypoints), the instance creates an object at the centroid of its points with
-        identity rotation (III-B); else None."""
+        identity rotation (III-B); else, with `masks` and mask_creates, at its mask's centroid at the mask's depth
+        (`MaskMeasurement.centroid`, a measured position), with the close keypoints it has; else None."""
         cfg = self.cfg
         kp, X_w, n_instance = points
         enough = len(kp) >= cfg.min_inliers
-        if len(kp) < cfg.min_new_points and not (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
-            return None
+        info = None
+        if len(kp) >= cfg.min_new_points or (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
+            origin = X_w.mean(axis=0)
+        else:
+            seen = None if masks is None or not cfg.mask_creates else masks.centroid(frame, inst, box)
+            if seen is None:
+                return None
+            origin, info = seen
         tr = objects.new_track(_instance_class(inst))
-        centroid = X_w.mean(axis=0)
-        new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
-        self._observe(frame, objects, tr, make_pose(np.eye(3), centroid), kp, new, inst, box)
+        new = objects.add_points(tr.track_id, X_w - origin, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
+        self._observe(frame, objects, tr, make_pose(np.eye(3), origin), kp, new, inst, box, position_info=info)
         free[kp] = False
         return tr.track_id
 
