@@ -70,13 +70,14 @@ class MaskMeasurement:
         return transform(T_w_c, _backproject(self.camera, c_m, z_m)[None])[0], self._information(frame, c_m, z_m, box)
 
     def position(self, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray, inst: int, box: np.ndarray,
-                 min_points: int) -> tuple[np.ndarray, np.ndarray] | None:
+                 min_inside: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(measured position of the object-frame origin (3,), its (3, 3) world information) from instance `inst`
         (box `box`) for an object of points `X_o` (object frame) predicted at `T_w_o_pred`: the predicted position
         moved by the offset between the mask's centroid at the mask's depth and the mean pixel, at the median
         depth, of the points predicted inside the mask (iterated: the points inside the mask once the prediction's
-        image offset is applied, 3 times), when >= `min_points` of them lie inside; an object of fewer than
-        `min_points` points (begun on its mask) compares its origin instead. Variances: the centroid
+        image offset is applied, 3 times), when >= `min_inside` of them lie inside; an object of fewer than
+        min_inliers points (begun on its mask: a few points' mean is not the mask's) compares its origin instead.
+        Variances: the centroid
         mask_centroid_sigma x the box size per axis, the disparity mask_disparity_sigma_px. None without a depth or
         with too few points inside."""
         cam = self.camera
@@ -84,19 +85,20 @@ class MaskMeasurement:
         if z_m is None:
             return None
         c_m = self._centroid(inst, box)
-        X_c = transform(frame.T_c_w @ T_w_o_pred, X_o if len(X_o) >= min_points else np.zeros((1, 3)))
+        shape = len(X_o) >= self.cfg.min_inliers
+        X_c = transform(frame.T_c_w @ T_w_o_pred, X_o if shape else np.zeros((1, 3)))
         X_c = X_c[X_c[:, 2] > 1e-3]
         if not len(X_c):
             return None
         uv = cam.project(X_c)
-        if len(X_o) >= min_points:
+        if shape:
             shift = np.zeros(2)
             for _ in range(3):
                 p = np.rint(uv + shift).astype(np.int64)
                 ok = (p[:, 0] >= 0) & (p[:, 0] < cam.width) & (p[:, 1] >= 0) & (p[:, 1] < cam.height)
                 inside = np.zeros(len(p), bool)
                 inside[ok] = self.instances[p[ok, 1], p[ok, 0]] == inst
-                if np.count_nonzero(inside) < min_points:
+                if np.count_nonzero(inside) < min_inside:
                     return None
                 c_p = uv[inside].mean(axis=0)
                 shift = c_m - c_p
