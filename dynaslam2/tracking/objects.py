@@ -10,7 +10,8 @@ Per frame, after the camera is tracked on static features only:
 then one pose-only optimization per object from its matches on one instance (of its class, the
 unclaimed one holding most of them); an instance holds at most one object, the one whose pose it
 supports with the most inliers (an object matched onto a neighbour's instance then tries its own).
-Unclaimed instances with enough close keypoints with depth become objects, unless their keypoints
+Unclaimed instances with enough close keypoints with depth become objects (smaller ones on their mask's centroid and
+depth, `objects.mask_creates`), unless their keypoints
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
@@ -18,7 +19,8 @@ association, the frame's instances assigned jointly; failing that, their box cen
 Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_chi2`, or, for a vehicle,
 their stereo points lie inside its predicted 3D extent, `objects.extent_min_fraction`; all in
 `box_association`). Then instances with too few close keypoints keep, by their box alone, a track seen within
-`objects.coast_max_s` (coasting: its id kept, its predicted pose not reported). Last, an instance still unclaimed
+`objects.coast_max_s` (coasting: its id kept, its position measured by the instance's mask, `mask_measurement`, or
+else its predicted pose, not reported). Last, an instance still unclaimed
 joins a young pedestrian track (no velocity yet) within the gate of its last box. No claim, vote or box join gives a
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
 `objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
@@ -353,9 +355,14 @@ class ObjectTracker:
             reidentified = {k for k in lost if late[k] is not None}
         for k in held:
             inst, tr = int(inst_ids[k]), late.get(k)
-            tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
-                                  reanchor=k in reidentified)
-                   if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free, masks))
+            if tr is not None:
+                tid = self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
+                                     reanchor=k in reidentified)
+            else:  # no object begins on its mask where an unseen track of its class could be (a fragment of it)
+                unexplained = not any(self.boxes.touches(frame, objects, other, pred[other.track_id], boxes[k])
+                                      for other in active if other.track_id not in seen
+                                      and other.cls == _instance_class(inst))
+                tid = self._create(frame, objects, inst, points[k], boxes[k], free, masks if unexplained else None)
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
@@ -570,7 +577,9 @@ class ObjectTracker:
             T_w_o, kp_in, pt_in, info = self._mask_register(frame, objects, track, T_w_o_pred, masks, inst, box)
         else:
             T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
-        if not len(kp_in) and len(kp):
+        if len(kp) and len(objects.points.of_track(track.track_id)) < self.cfg.min_inliers:
+            T_w_o = self._recentre(objects, track, T_w_o, X_w)
+        elif not len(kp_in) and len(kp):
             T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
         rest = ~np.isin(kp, kp_in)
         new = objects.add_points(track.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
@@ -748,6 +757,21 @@ class ObjectTracker:
         T_w_o[:3, 3] = t + R @ shift
         track.state_mean, track.state_cov = None, None
         track.velocity_known = False
+        return T_w_o
+
+    def _recentre(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray) -> np.ndarray:
+        """The pose at which a box join adds the first min_inliers-or-more points `X_w` to a track begun on its mask
+        (`MaskMeasurement.centroid`): the origin moved onto their median, as an object begun on its points has it
+        (a mask's depth can be off by metres at 30 m; an origin off the body turns its errors into the object's);
+        its few points and the position filter's state move with it, so the track stays where it was."""
+        R, t = T_w_o_pred[:3, :3], T_w_o_pred[:3, 3]
+        shift = np.median((X_w - t) @ R, axis=0)
+        pts = objects.points.of_track(track.track_id)
+        objects.points.X_o[pts] -= shift
+        T_w_o = T_w_o_pred.copy()
+        T_w_o[:3, 3] = t + R @ shift
+        if track.state_mean is not None:
+            track.state_mean[:3] += R @ shift
         return T_w_o
 
     def _cull(self, objects: ObjectMap, track_ids: list[int]) -> None:
