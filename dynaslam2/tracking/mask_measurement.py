@@ -59,11 +59,16 @@ class MaskMeasurement:
             z = cam.bf / d if d > 0 else -1.0
         return z if 0 < z <= cfg.max_point_depth_m else None
 
-    def centroid(self, frame: Frame, inst: int, box: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def centroid(self, frame: Frame, inst: int, box: np.ndarray, z_kp: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """(world point (3,), its (3, 3) information) of instance `inst`'s mask centroid at the mask's depth
-        (`_centroid`), or None without a depth: where a track begun on the mask puts its origin."""
+        (`_centroid`): where a track begun on the mask puts its origin. None without a depth, or when the median
+        disparity of the instance's stereo keypoints (depths `z_kp`; none: None) lies further than
+        mask_keypoint_agreement_px from the mask's: a track's first position has no filter to gate it (a car at 39 m
+        whose mask matched at 2 m, crossing s53)."""
         z_m = self.depth(inst, box)
-        if z_m is None:
+        if z_m is None or not len(z_kp):
+            return None
+        if abs(np.median(self.camera.bf / z_kp) - self.camera.bf / z_m) > self.cfg.mask_keypoint_agreement_px:
             return None
         c_m = self._centroid(inst, box)
         T_w_c = np.linalg.inv(frame.T_c_w)

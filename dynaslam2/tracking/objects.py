@@ -594,7 +594,8 @@ class ObjectTracker:
         """With >= min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
         small_new_fraction of its keypoints), the instance creates an object at the centroid of its points with
         identity rotation (III-B); else, with `masks` and mask_creates, at its mask's centroid at the mask's depth
-        (`MaskMeasurement.centroid`, a measured position), with the close keypoints it has; else None."""
+        when its close keypoints agree with that depth (`MaskMeasurement.centroid`, a measured position), with
+        those keypoints as its points; else None."""
         cfg = self.cfg
         kp, X_w, n_instance = points
         enough = len(kp) >= cfg.min_inliers
@@ -602,7 +603,7 @@ class ObjectTracker:
         if len(kp) >= cfg.min_new_points or (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
             origin = X_w.mean(axis=0)
         else:
-            seen = None if masks is None or not cfg.mask_creates else masks.centroid(frame, inst, box)
+            seen = None if masks is None or not cfg.mask_creates else masks.centroid(frame, inst, box, frame.depth[kp])
             if seen is None:
                 return None
             origin, info = seen
