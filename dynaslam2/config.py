@@ -673,7 +673,7 @@ class ObjectsConfig:
     mask_measurement: bool = True
     mask_min_pixels: int = 30
     mask_min_ncc: float = 0.5
-    mask_uniqueness: float = 0.8
+    mask_uniqueness: float = 0.6
     mask_disparity_sigma_px: float = 0.3  # the disparity's sigma in the position measurement
     mask_centroid_sigma: float = 0.15  # the centroid's sigma per image axis, as a fraction of the mask box's size
     mask_gate_nis: float = 11.34  # a mask measurement's validation gate (chi2, 3 dof, 99 %) against the filter
