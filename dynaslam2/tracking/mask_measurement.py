@@ -74,15 +74,14 @@ class MaskMeasurement:
         T_w_c = np.linalg.inv(frame.T_c_w)
         return transform(T_w_c, _backproject(self.camera, c_m, z_m)[None])[0], self._information(frame, c_m, z_m, box)
 
-    def position(self, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray, inst: int, box: np.ndarray,
+    def position(self, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray | None, inst: int, box: np.ndarray,
                  min_inside: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(measured position of the object-frame origin (3,), its (3, 3) world information) from instance `inst`
         (box `box`) for an object of points `X_o` (object frame) predicted at `T_w_o_pred`: the predicted position
         moved by the offset between the mask's centroid at the mask's depth and the mean pixel, at the median
         depth, of the points predicted inside the mask (iterated: the points inside the mask once the prediction's
-        image offset is applied, 3 times), when >= `min_inside` of them lie inside; an object of fewer than
-        min_inliers points (begun on its mask: a few points' mean is not the mask's) compares its origin instead.
-        Variances: the centroid
+        image offset is applied, 3 times), when >= `min_inside` of them lie inside; `X_o` None (an object begun on
+        its mask, whose few points' mean is not the mask's) compares its origin instead. Variances: the centroid
         mask_centroid_sigma x the box size per axis, the disparity mask_disparity_sigma_px. None without a depth or
         with too few points inside."""
         cam = self.camera
@@ -90,7 +89,7 @@ class MaskMeasurement:
         if z_m is None:
             return None
         c_m = self._centroid(inst, box)
-        shape = len(X_o) >= self.cfg.min_inliers
+        shape = X_o is not None
         X_c = transform(frame.T_c_w @ T_w_o_pred, X_o if shape else np.zeros((1, 3)))
         X_c = X_c[X_c[:, 2] > 1e-3]
         if not len(X_c):

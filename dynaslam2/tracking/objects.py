@@ -706,15 +706,19 @@ class ObjectTracker:
                        masks: MaskMeasurement | None, inst: int, box: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """`_register` for a coasting instance: the predicted pose of `track` translated to the position its mask
-        measures (`MaskMeasurement.position`, >= register_min_matches of the track's points predicted inside it),
-        no matched points, and the measurement's information, when the position filter's validation gate at
-        mask_gate_nis passes (a mask's disparity can take a wrong peak: one found 5 m for a person at 22 m); else
-        the prediction, no match and None (also without the filter's state)."""
+        measures (`MaskMeasurement.position`: against >= register_min_matches of the track's points predicted
+        inside it that were matched again after the frame that made them, or against its origin when it has fewer
+        than min_inliers points, begun on its mask), no matched points, and the measurement's information, when the
+        position filter's validation gate at mask_gate_nis passes (a mask's disparity can take a wrong peak: one
+        found 5 m for a person at 22 m); else the prediction, no match and None (also without the filter's state).
+        (A box join's points made at a wrong prediction carry wrong depths: 3 of a person's 6 at 14-16 m against
+        18.6 m, crossing s40 f40, moved its mask measurement 3 m.)"""
         cfg = self.cfg
         none = np.zeros(0, np.int64)
         if masks is None or not cfg.filter or track.state_mean is None:
             return T_w_o_pred, none, none, None
-        X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
+        pts = objects.points.of_track(track.track_id)
+        X_o = objects.points.X_o[pts[objects.points.n_found[pts] >= 3]] if len(pts) >= cfg.min_inliers else None
         measured = masks.position(frame, T_w_o_pred, X_o, inst, box, cfg.register_min_matches)
         if measured is None or gated(track, frame.timestamp - track.last.timestamp, measured[0],
                                      lambda: measured[1], cfg, cfg.mask_gate_nis):
