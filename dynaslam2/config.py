@@ -677,10 +677,6 @@ class ObjectsConfig:
     mask_disparity_sigma_px: float = 0.3  # the disparity's sigma in the position measurement
     mask_centroid_sigma: float = 0.15  # the centroid's sigma per image axis, as a fraction of the mask box's size
     mask_gate_nis: float = 11.34  # a mask measurement's validation gate (chi2, 3 dof, 99 %) against the filter
-    # An instance too small for an object by its keypoints (min_new_points) creates one at its mask's centroid and
-    # depth (its few close keypoints its points), which its mask then measures.
-    mask_creates: bool = True
-    mask_keypoint_agreement_px: float = 1.0  # |median keypoint disparity - mask disparity| allowed for a creation
     # Tracks unseen for longer than this are no longer matched (occlusions up to it keep the id).
     max_lost_s: float = 2.0
     # Velocity known (prediction (a) used) only if the last two observations are this close in time.
@@ -813,8 +809,7 @@ class ObjectsConfig:
                      "max_angular_speed", "ransac_inlier_m", "max_lost_s", "max_velocity_gap_s", "join_max_gap_s",
                      "accel_sigma", "position_floor_m", "initial_speed_sigma", "pedestrian_initial_speed_sigma",
                      "gate_nis", "angular_accel_sigma", "rotation_floor_rad", "initial_angular_speed_sigma",
-                     "register_chi2", "mask_disparity_sigma_px", "mask_centroid_sigma", "mask_gate_nis",
-                     "mask_keypoint_agreement_px"):
+                     "register_chi2", "mask_disparity_sigma_px", "mask_centroid_sigma", "mask_gate_nis"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
         for name in ("coast_max_s", "box_velocity_window_s", "box_gate_chi2", "box_gate_size_sigma", "extent_margin_m",

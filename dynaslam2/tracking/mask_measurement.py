@@ -59,29 +59,14 @@ class MaskMeasurement:
             z = cam.bf / d if d > 0 else -1.0
         return z if 0 < z <= cfg.max_point_depth_m else None
 
-    def centroid(self, frame: Frame, inst: int, box: np.ndarray, z_kp: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """(world point (3,), its (3, 3) information) of instance `inst`'s mask centroid at the mask's depth
-        (`_centroid`): where a track begun on the mask puts its origin. None without a depth, or when the median
-        disparity of the instance's stereo keypoints (depths `z_kp`; none: None) lies further than
-        mask_keypoint_agreement_px from the mask's: a track's first position has no filter to gate it (a car at 39 m
-        whose mask matched at 2 m, crossing s53)."""
-        z_m = self.depth(inst, box)
-        if z_m is None or not len(z_kp):
-            return None
-        if abs(np.median(self.camera.bf / z_kp) - self.camera.bf / z_m) > self.cfg.mask_keypoint_agreement_px:
-            return None
-        c_m = self._centroid(inst, box)
-        T_w_c = np.linalg.inv(frame.T_c_w)
-        return transform(T_w_c, _backproject(self.camera, c_m, z_m)[None])[0], self._information(frame, c_m, z_m, box)
-
     def position(self, frame: Frame, T_w_o_pred: np.ndarray, X_o: np.ndarray | None, inst: int, box: np.ndarray,
                  min_inside: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(measured position of the object-frame origin (3,), its (3, 3) world information) from instance `inst`
         (box `box`) for an object of points `X_o` (object frame) predicted at `T_w_o_pred`: the predicted position
         moved by the offset between the mask's centroid at the mask's depth and the mean pixel, at the median
         depth, of the points predicted inside the mask (iterated: the points inside the mask once the prediction's
-        image offset is applied, 3 times), when >= `min_inside` of them lie inside; `X_o` None (an object begun on
-        its mask, whose few points' mean is not the mask's) compares its origin instead. Variances: the centroid
+        image offset is applied, 3 times), when >= `min_inside` of them lie inside; `X_o` None (an object with too
+        few points to outline it) compares its origin instead. Variances: the centroid
         mask_centroid_sigma x the box size per axis, the disparity mask_disparity_sigma_px. None without a depth or
         with too few points inside."""
         cam = self.camera

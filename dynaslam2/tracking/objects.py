@@ -10,8 +10,7 @@ Per frame, after the camera is tracked on static features only:
 then one pose-only optimization per object from its matches on one instance (of its class, the
 unclaimed one holding most of them); an instance holds at most one object, the one whose pose it
 supports with the most inliers (an object matched onto a neighbour's instance then tries its own).
-Unclaimed instances with enough close keypoints with depth become objects (smaller ones on their mask's centroid and
-depth, `objects.mask_creates`), unless their keypoints
+Unclaimed instances with enough close keypoints with depth become objects, unless their keypoints
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
 their box overlaps the box of an object of their class seen recently (instance-to-instance IoU
@@ -20,8 +19,8 @@ Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_c
 their stereo points lie inside its predicted 3D extent, `objects.extent_min_fraction`; all in
 `box_association`). Then instances with too few close keypoints keep, by their box alone, a track seen within
 `objects.coast_max_s` (coasting: its id kept, its position measured by the instance's mask, `mask_measurement`, or
-else its predicted pose, not reported). Last, an instance still unclaimed
-joins a young pedestrian track (no velocity yet) within the gate of its last box. No claim, vote or box join gives a
+else its predicted pose, not reported). Last, an instance still unclaimed joins a young pedestrian track (no
+velocity yet) within the gate of its last box. No claim, vote or box join gives a
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
 `objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
 its colours and the gate (`objects.appearance_reid_distance`). A tentative track (fewer than
@@ -355,14 +354,9 @@ class ObjectTracker:
             reidentified = {k for k in lost if late[k] is not None}
         for k in held:
             inst, tr = int(inst_ids[k]), late.get(k)
-            if tr is not None:
-                tid = self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
-                                     reanchor=k in reidentified)
-            else:  # no object begins on its mask where an unseen track of its class could be (a fragment of it)
-                unexplained = not any(self.boxes.touches(frame, objects, other, pred[other.track_id], boxes[k])
-                                      for other in active if other.track_id not in seen
-                                      and other.cls == _instance_class(inst))
-                tid = self._create(frame, objects, inst, points[k], boxes[k], free, masks if unexplained else None)
+            tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
+                                  reanchor=k in reidentified)
+                   if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
@@ -577,9 +571,7 @@ class ObjectTracker:
             T_w_o, kp_in, pt_in, info = self._mask_register(frame, objects, track, T_w_o_pred, masks, inst, box)
         else:
             T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
-        if len(kp) and len(objects.points.of_track(track.track_id)) < self.cfg.min_inliers:
-            T_w_o = self._recentre(objects, track, T_w_o, X_w)
-        elif not len(kp_in) and len(kp):
+        if not len(kp_in) and len(kp):
             T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
         rest = ~np.isin(kp, kp_in)
         new = objects.add_points(track.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
@@ -590,26 +582,19 @@ class ObjectTracker:
         return track.track_id
 
     def _create(self, frame: Frame, objects: ObjectMap, inst: int, points: tuple[np.ndarray, np.ndarray, int],
-                box: np.ndarray, free: np.ndarray, masks: MaskMeasurement | None = None) -> int | None:
+                box: np.ndarray, free: np.ndarray) -> int | None:
         """With >= min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
         small_new_fraction of its keypoints), the instance creates an object at the centroid of its points with
-        identity rotation (III-B); else, with `masks` and mask_creates, at its mask's centroid at the mask's depth
-        when its close keypoints agree with that depth (`MaskMeasurement.centroid`, a measured position), with
-        those keypoints as its points; else None."""
+        identity rotation (III-B); else None."""
         cfg = self.cfg
         kp, X_w, n_instance = points
         enough = len(kp) >= cfg.min_inliers
-        info = None
-        if len(kp) >= cfg.min_new_points or (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
-            origin = X_w.mean(axis=0)
-        else:
-            seen = None if masks is None or not cfg.mask_creates else masks.centroid(frame, inst, box, frame.depth[kp])
-            if seen is None:
-                return None
-            origin, info = seen
+        if len(kp) < cfg.min_new_points and not (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
+            return None
         tr = objects.new_track(_instance_class(inst))
-        new = objects.add_points(tr.track_id, X_w - origin, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
-        self._observe(frame, objects, tr, make_pose(np.eye(3), origin), kp, new, inst, box, position_info=info)
+        centroid = X_w.mean(axis=0)
+        new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
+        self._observe(frame, objects, tr, make_pose(np.eye(3), centroid), kp, new, inst, box)
         free[kp] = False
         return tr.track_id
 
@@ -708,7 +693,7 @@ class ObjectTracker:
         """`_register` for a coasting instance: the predicted pose of `track` translated to the position its mask
         measures (`MaskMeasurement.position`: against >= register_min_matches of the track's points predicted
         inside it that were matched again after the frame that made them, or against its origin when it has fewer
-        than min_inliers points, begun on its mask), no matched points, and the measurement's information, when the
+        than min_inliers points left), no matched points, and the measurement's information, when the
         position filter's validation gate at mask_gate_nis passes (a mask's disparity can take a wrong peak: one
         found 5 m for a person at 22 m); else the prediction, no match and None (also without the filter's state).
         (A box join's points made at a wrong prediction carry wrong depths: 3 of a person's 6 at 14-16 m against
@@ -762,21 +747,6 @@ class ObjectTracker:
         T_w_o[:3, 3] = t + R @ shift
         track.state_mean, track.state_cov = None, None
         track.velocity_known = False
-        return T_w_o
-
-    def _recentre(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray) -> np.ndarray:
-        """The pose at which a box join adds the first min_inliers-or-more points `X_w` to a track begun on its mask
-        (`MaskMeasurement.centroid`): the origin moved onto their median, as an object begun on its points has it
-        (a mask's depth can be off by metres at 30 m; an origin off the body turns its errors into the object's);
-        its few points and the position filter's state move with it, so the track stays where it was."""
-        R, t = T_w_o_pred[:3, :3], T_w_o_pred[:3, 3]
-        shift = np.median((X_w - t) @ R, axis=0)
-        pts = objects.points.of_track(track.track_id)
-        objects.points.X_o[pts] -= shift
-        T_w_o = T_w_o_pred.copy()
-        T_w_o[:3, 3] = t + R @ shift
-        if track.state_mean is not None:
-            track.state_mean[:3] += R @ shift
         return T_w_o
 
     def _cull(self, objects: ObjectMap, track_ids: list[int]) -> None:
