@@ -66,9 +66,8 @@ class MaskMeasurement:
         moved by the offset between the mask's centroid at the mask's depth and the mean pixel, at the median
         depth, of the points predicted inside the mask (iterated: the points inside the mask once the prediction's
         image offset is applied, 3 times), when >= `min_inside` of them lie inside; `X_o` None (an object with too
-        few points to outline it) compares its origin instead. Variances: the centroid
-        mask_centroid_sigma x the box size per axis, the disparity mask_disparity_sigma_px. None without a depth or
-        with too few points inside."""
+        few points to outline it) compares its origin instead. Variances: the centroid mask_centroid_sigma x the box
+        size per axis, the disparity mask_disparity_sigma_px. None without a depth or with too few points inside."""
         cam = self.camera
         z_m = self.depth(inst, box)
         if z_m is None:

@@ -703,7 +703,8 @@ class ObjectTracker:
         if masks is None or not cfg.filter or track.state_mean is None:
             return T_w_o_pred, none, none, None
         pts = objects.points.of_track(track.track_id)
-        X_o = objects.points.X_o[pts[objects.points.n_found[pts] >= 3]] if len(pts) >= cfg.min_inliers else None
+        again = objects.points.n_found[pts] >= 3  # 1 when added, 2 after the observation that made it
+        X_o = objects.points.X_o[pts[again]] if len(pts) >= cfg.min_inliers else None
         measured = masks.position(frame, T_w_o_pred, X_o, inst, box, cfg.register_min_matches)
         if measured is None or gated(track, frame.timestamp - track.last.timestamp, measured[0],
                                      lambda: measured[1], cfg, cfg.mask_gate_nis):
