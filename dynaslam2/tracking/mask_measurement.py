@@ -83,7 +83,7 @@ class MaskMeasurement:
             shift = np.zeros(2)
             for _ in range(3):
                 p = np.rint(uv + shift).astype(np.int64)
-                ok = (p[:, 0] >= 0) & (p[:, 0] < cam.width) & (p[:, 1] >= 0) & (p[:, 1] < cam.height)
+                ok = cam.in_image(p)
                 inside = np.zeros(len(p), bool)
                 inside[ok] = self.instances[p[ok, 1], p[ok, 0]] == inst
                 if np.count_nonzero(inside) < min_inside:
@@ -93,7 +93,7 @@ class MaskMeasurement:
             z_p = float(np.median(X_c[inside, 2]))
         else:
             c_p, z_p = uv[0], float(X_c[0, 2])
-        offset_c = _backproject(cam, c_m, z_m) - _backproject(cam, c_p, z_p)
+        offset_c = np.subtract(*cam.backproject(np.array([c_m, c_p]), np.array([z_m, z_p])))
         return T_w_o_pred[:3, 3] + frame.T_c_w[:3, :3].T @ offset_c, self._information(frame, c_m, z_m, box)
 
     def _centroid(self, inst: int, box: np.ndarray) -> np.ndarray:
@@ -116,7 +116,3 @@ class MaskMeasurement:
         R_w_c = frame.T_c_w[:3, :3].T
         return R_w_c @ np.linalg.inv(cov_c) @ R_w_c.T
 
-
-def _backproject(camera: StereoCamera, uv: np.ndarray, z: float) -> np.ndarray:
-    """Camera-frame point of pixel `uv` at depth `z`."""
-    return np.array([(uv[0] - camera.cx) * z / camera.fx, (uv[1] - camera.cy) * z / camera.fy, z])
