@@ -481,23 +481,25 @@ def test_box_joins_keep_a_track_whose_instance_is_seen_beyond_join_max_gap_s():
     assert [o.measured for o in objects.tracks[ids[0]].observations] == [i < 5 for i in range(n)]
 
 
-def test_track_goes_on_at_its_prediction_while_its_instance_has_too_few_points():
+@pytest.mark.parametrize(("report_coast_s", "reported"), [(0.3, (5, 6)), (0.15, (5,)), (0.0, ())])
+def test_track_goes_on_at_its_prediction_while_its_instance_has_too_few_points(report_coast_s, reported):
     """For two frames the car's instance carries only 4 keypoints (too few for a pose, a join or an
     object): the instance's box associates it with the track (objects.coast_max_s), which goes on at its
-    constant-velocity prediction (measured=False), unreported, and is measured again when the points come back;
-    one id throughout."""
+    constant-velocity prediction (measured=False), reported only within objects.report_coast_s of its last
+    measurement (frame 5 is 0.1 s after it, frame 6 0.2 s), and is measured again when the points come back; one
+    id throughout."""
     rng = np.random.default_rng(6)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     corners = Body(rng, 1001, 4, (4.0, 1.5, 1.5))
     corners.X_b = np.array([[-2.0, -0.75, -0.75], [2.0, 0.75, -0.75], [-2.0, 0.75, 0.75], [2.0, -0.75, 0.75]])
     T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 15.0])) for i in range(10)]
-    objects, trk = ObjectMap(), tracker("objects.filter=false")
+    objects, trk = ObjectMap(), tracker("objects.filter=false", f"objects.report_coast_s={report_coast_s}")
     ids = []
     for i in range(10):
         body = corners if i in (5, 6) else car
         ids.append([e.track_id for e in trk.track(make_frame(i, [(body, T_car[i])]), None, objects).estimates])
-    assert ids[5] == ids[6] == [] and len(ids[0]) == 1
-    assert all(x == ids[0] for k, x in enumerate(ids) if k not in (5, 6))
+    assert len(ids[0]) == 1
+    assert all(x == (ids[0] if k not in (5, 6) or k in reported else []) for k, x in enumerate(ids))
     assert len(objects.tracks) == 1
     tr = objects.tracks[ids[0][0]]
     assert [o.measured for o in tr.observations] == [i not in (5, 6) for i in range(10)]

@@ -19,8 +19,8 @@ Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_c
 their stereo points lie inside its predicted 3D extent, `objects.extent_min_fraction`; all in
 `box_association`). Then instances with too few close keypoints keep, by their box alone, a track seen within
 `objects.coast_max_s` (coasting: its id kept, its position measured by the instance's mask, `mask_measurement`, or
-else its predicted pose, not reported). Last, an instance still unclaimed joins a young pedestrian track (no
-velocity yet) within the gate of its last box. No claim, vote or box join gives a
+else its predicted pose, not reported unless `objects.report_coast_s`). Last, an instance still unclaimed joins a
+young pedestrian track (no velocity yet) within the gate of its last box. No claim, vote or box join gives a
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
 `objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
 its colours and the gate (`objects.appearance_reid_distance`). A tentative track (fewer than
@@ -76,6 +76,19 @@ class ObjectFrameResult:
     estimates: list[ObjectEstimate]
     n_matches: int
     weak: list[int]
+
+
+def _coasted(obs: ObjectObservation) -> bool:
+    """An observation of the instance's box alone: no measurement, no points (its pose is the prediction)."""
+    return not obs.measured and obs.n_points == 0
+
+
+def _seen_within(track: ObjectTrack, obs: ObjectObservation, window_s: float) -> bool:
+    """True when the last observation of `track` before `obs` that is not coasted lies within `window_s` of it."""
+    for earlier in reversed(track.observations):
+        if earlier.frame_index < obs.frame_index and not _coasted(earlier):
+            return obs.timestamp - earlier.timestamp <= window_s
+    return False
 
 
 def dynamic_keypoints(frame: Frame) -> np.ndarray:
@@ -759,16 +772,19 @@ class ObjectTracker:
         P.alive[pts[bad]] = False
 
     @staticmethod
-    def estimates(objects: ObjectMap, frame_index: int, min_observations: int = 1) -> list[ObjectEstimate]:
+    def estimates(objects: ObjectMap, frame_index: int, min_observations: int = 1,
+                  report_coast_s: float = 0.0) -> list[ObjectEstimate]:
         """Output of the objects observed at `frame_index` (world-frame velocities), by track id: those whose
-        track had at least `min_observations` observations by then (a confirmed track), and not coasted there (an
-        observation of its instance's box alone, without points: its pose is the prediction, `coast_max_s`)."""
+        track had at least `min_observations` observations by then (a confirmed track); a coasted observation (its
+        instance's box alone, without points or mask measurement: its pose is the prediction, `coast_max_s`) only
+        within `report_coast_s` of the track's last observation with a measurement or points."""
         out = []
         for tid in sorted(objects.tracks):
             tr = objects.tracks[tid]
             obs = tr.at_frame(frame_index)
-            if (obs is None or (not obs.measured and obs.n_points == 0) or len(tr.observations) < min_observations
-                    or tr.observations[min_observations - 1].frame_index > frame_index):
+            if (obs is None or len(tr.observations) < min_observations
+                    or tr.observations[min_observations - 1].frame_index > frame_index
+                    or (_coasted(obs) and not _seen_within(tr, obs, report_coast_s))):
                 continue
             v_w, w_w = velocity_to_world(obs.T_w_o, obs.v_o, obs.w_o)
             out.append(ObjectEstimate(track_id=tid, cls=tr.cls, T_w_o=obs.T_w_o.copy(), v_w=v_w, w_w=w_w,
@@ -785,7 +801,8 @@ class ObjectTracker:
             if len(tr.observations) > 1 and n_features >= self.cfg.weak_min_features \
                     and obs.n_points < min(self.cfg.weak_max_tracked, self.cfg.weak_tracked_ratio * n_features):
                 weak.append(tid)
-        return ObjectFrameResult(self.estimates(objects, frame.index), n_matches, weak)
+        return ObjectFrameResult(self.estimates(objects, frame.index, report_coast_s=self.cfg.report_coast_s),
+                                 n_matches, weak)
 
     # --------------------------------------------------------------- keyframes
     def on_keyframe(self, frame: Frame, kf_id: int, objects: ObjectMap, weak: list[int]) -> None:
