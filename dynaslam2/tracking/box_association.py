@@ -160,7 +160,7 @@ class BoxAssociation:
         moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
         car passing the camera, a box clipped to the image border);
         "extent": by the fraction of the instance's stereo points `X_w` inside a velocity-known vehicle track's
-        predicted 3D extent (`_extent_fraction` >= extent_min_fraction; a pedestrian's grown extent holds its
+        predicted 3D extent (`extent_fraction` >= extent_min_fraction; a pedestrian's grown extent holds its
         neighbour);
         "young": likewise to a track without a velocity (its 3D prediction stands still) whose `_last_box` overlaps
         the instance's, when its class has a speed prior tighter than initial_speed_sigma (`initial_speed_sigma`:
@@ -201,8 +201,8 @@ class BoxAssociation:
                     for t in np.flatnonzero(cand.any(axis=0)):
                         if recent[t].velocity_known and recent[t].cls in VEHICLE_CLASSES:
                             rows = np.flatnonzero(cand[:, t])
-                            cost[rows, t] = -self._extent_fraction(objects, recent[t], pred[recent[t].track_id],
-                                                                   [X_w[k] for k in rows])
+                            cost[rows, t] = -self.extent_fraction(objects, recent[t], pred[recent[t].track_id],
+                                                                  [X_w[k] for k in rows])
                 ok = (cost < 0) & (-cost >= cfg.extent_min_fraction)
             elif stage == "appearance":
                 cost = np.full(cand.shape, np.inf)
@@ -242,8 +242,8 @@ class BoxAssociation:
                         free[:, t] = False
         return joined
 
-    def _extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
-                         X_w: list[np.ndarray]) -> np.ndarray:
+    def extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                        X_w: list[np.ndarray]) -> np.ndarray:
         """Fraction of each instance's world points `X_w` inside the track's 3D extent at its predicted pose: the
         5th to 95th percentile per object-frame axis of its points, grown by extent_margin_m (0 without points)."""
         X_o = objects.points.X_o[objects.points.of_track(track.track_id)]

@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from dynaslam2.classes import VEHICLE_CLASSES
 from dynaslam2.config import ObjectsConfig
 from dynaslam2.geometry.se3 import so3_exp, so3_log, so3_right_jacobian
 from dynaslam2.map.objects import ObjectTrack
@@ -27,9 +28,16 @@ def capped_angular_velocity(w_o: np.ndarray, cfg: ObjectsConfig) -> np.ndarray:
 
 
 def predict_state(track: ObjectTrack, dt: float, cfg: ObjectsConfig) -> tuple[np.ndarray, np.ndarray]:
-    """(mean (6,), covariance (6, 6)) of the track's position filter predicted `dt` ahead."""
+    """(mean (6,), covariance (6, 6)) of the track's position filter predicted `dt` ahead; with
+    objects.vehicle_turn a vehicle's velocity turns at its rotation's (capped) angular velocity, a coordinated turn
+    of known rate (the position moves along the velocity turned half way)."""
     F = np.eye(6)
     F[:3, 3:] = dt * np.eye(3)
+    if cfg.vehicle_turn and track.cls in VEHICLE_CLASSES and track.observations:
+        last = track.last
+        w_w = last.T_w_o[:3, :3] @ capped_angular_velocity(last.w_o, cfg)
+        F[:3, 3:] = dt * so3_exp(0.5 * dt * w_w)
+        F[3:, 3:] = so3_exp(dt * w_w)
     return F @ track.state_mean, F @ track.state_cov @ F.T + white_acceleration_noise(cfg.accel_sigma, dt)
 
 

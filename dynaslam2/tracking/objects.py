@@ -9,7 +9,8 @@ Per frame, after the camera is tracked on static features only:
     keypoints of the instance that overlaps their last 2D box most (consecutive frames);
 then one pose-only optimization per object from its matches on one instance (of its class, the
 unclaimed one holding most of them); an instance holds at most one object, the one whose pose it
-supports with the most inliers (an object matched onto a neighbour's instance then tries its own).
+supports with the most inliers (an object matched onto a neighbour's instance then tries its own; a
+vehicle's claim on an instance outside its predicted 3D extent is refused, `objects.claim_min_extent_fraction`).
 Unclaimed instances with enough close keypoints with depth become objects, unless their keypoints
 mostly match the points of one map object of their class not seen in this frame (it re-appears: same
 track id, so occlusions keep ids, the matching being against the map, not the previous frame) or
@@ -384,12 +385,22 @@ class ObjectTracker:
     def _propose(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, kp: np.ndarray,
                  pts: np.ndarray, free: np.ndarray, claimed: set[int]) -> PoseProposal | None:
         """The pose of `track` from its matches keypoint `kp` <-> point `pts` kept on one unclaimed instance
-        (`_one_instance`), or None."""
+        (`_one_instance`), or None; also None for a velocity-known vehicle whose instance's close stereo points (>=
+        min_inliers) lie outside its predicted 3D extent (fraction below objects.claim_min_extent_fraction:
+        another car, crossing s62)."""
         kp, pts = self._one_instance(frame, track, kp, pts, free, claimed)
         if len(kp) < self.cfg.min_inliers:
             return None
         est = self.estimate_pose(frame, objects, track, T_w_o_pred, kp, pts, robust_init=not track.velocity_known)
-        return None if est is None else PoseProposal(est[0], kp, pts, est[1], int(frame.instance_id[kp[0]]))
+        if est is None:
+            return None
+        inst = int(frame.instance_id[kp[0]])
+        if self.cfg.claim_min_extent_fraction > 0 and track.cls in VEHICLE_CLASSES and track.velocity_known:
+            X_w = self._world_points(frame, self._close(frame, np.flatnonzero(frame.instance_id == inst)))
+            if (len(X_w) >= self.cfg.min_inliers and self.boxes.extent_fraction(objects, track, T_w_o_pred, [X_w])[0]
+                    < self.cfg.claim_min_extent_fraction):
+                return None
+        return PoseProposal(est[0], kp, pts, est[1], inst)
 
     def _one_instance(self, frame: Frame, track: ObjectTrack, kp: np.ndarray, pts: np.ndarray, free: np.ndarray,
                       claimed: set[int]) -> tuple[np.ndarray, np.ndarray]:
