@@ -391,16 +391,14 @@ class ObjectTracker:
         kp, pts = self._one_instance(frame, track, kp, pts, free, claimed)
         if len(kp) < self.cfg.min_inliers:
             return None
-        est = self.estimate_pose(frame, objects, track, T_w_o_pred, kp, pts, robust_init=not track.velocity_known)
-        if est is None:
-            return None
         inst = int(frame.instance_id[kp[0]])
         if self.cfg.claim_min_extent_fraction > 0 and track.cls in VEHICLE_CLASSES and track.velocity_known:
             X_w = self._world_points(frame, self._close(frame, np.flatnonzero(frame.instance_id == inst)))
             if (len(X_w) >= self.cfg.min_inliers and self.boxes.extent_fraction(objects, track, T_w_o_pred, [X_w])[0]
                     < self.cfg.claim_min_extent_fraction):
                 return None
-        return PoseProposal(est[0], kp, pts, est[1], inst)
+        est = self.estimate_pose(frame, objects, track, T_w_o_pred, kp, pts, robust_init=not track.velocity_known)
+        return None if est is None else PoseProposal(est[0], kp, pts, est[1], inst)
 
     def _one_instance(self, frame: Frame, track: ObjectTrack, kp: np.ndarray, pts: np.ndarray, free: np.ndarray,
                       claimed: set[int]) -> tuple[np.ndarray, np.ndarray]:
