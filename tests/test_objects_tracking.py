@@ -613,19 +613,29 @@ def test_an_instance_goes_to_the_object_its_keypoints_support_most():
     assert {e.instance_id: e.track_id for e in estimates} == id_of
 
 
-def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong():
+@pytest.mark.parametrize("min_fraction", [0.1, 0.0])
+def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong(min_fraction):
     """A car whose velocity estimate is badly wrong (its motion-compensated box lands elsewhere) and
-    whose appearance changes keeps its id through the IoU of its last box, as it was."""
+    whose appearance changes keeps its id through the IoU of its last box, as it was. Its keypoints lie 6 m
+    from its prediction, outside its predicted extent: with objects.join_points_min_extent_fraction they do not
+    become its points and the observation, the prediction, is not reported; without, they are added at the
+    wrong prediction."""
     rng = np.random.default_rng(10)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.3 * i, 0.8, 15.0])) for i in range(5)]
-    objects, trk = ObjectMap(), tracker("objects.filter=false")
+    objects, trk = ObjectMap(), tracker("objects.filter=false", f"objects.join_points_min_extent_fraction={min_fraction}")
     e = track_alone(trk, objects, car, T_car[:4])
     tr = objects.tracks[e.track_id]
     tr.last.v_o = np.array([60.0, 0.0, 0.0])  # a wrong velocity: 6 m (~160 px) off in the next frame
     car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
-    (e4,) = trk.track(make_frame(4, [(car, T_car[4])]), None, objects).estimates
-    assert e4.track_id == e.track_id and not tr.last.measured
+    n_points = len(objects.points.of_track(tr.track_id))
+    estimates = trk.track(make_frame(4, [(car, T_car[4])]), None, objects).estimates
+    assert tr.last.frame_index == 4 and tr.last.instance_id == 1001 and not tr.last.measured
+    added = len(objects.points.of_track(tr.track_id)) - n_points
+    if min_fraction > 0:
+        assert added == 0 and not estimates
+    else:
+        assert added > 0 and [x.track_id for x in estimates] == [e.track_id]
 
 
 def test_box_association_prefers_a_motion_compensated_box_to_a_last_box_as_it_was():

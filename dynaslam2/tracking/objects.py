@@ -392,13 +392,20 @@ class ObjectTracker:
         if len(kp) < self.cfg.min_inliers:
             return None
         inst = int(frame.instance_id[kp[0]])
-        if self.cfg.claim_min_extent_fraction > 0 and track.cls in VEHICLE_CLASSES and track.velocity_known:
-            X_w = self._world_points(frame, self._close(frame, np.flatnonzero(frame.instance_id == inst)))
-            if (len(X_w) >= self.cfg.min_inliers and self.boxes.extent_fraction(objects, track, T_w_o_pred, [X_w])[0]
-                    < self.cfg.claim_min_extent_fraction):
-                return None
+        if self.cfg.claim_min_extent_fraction > 0 and self._outside_extent(
+                objects, track, T_w_o_pred, self._world_points(frame, self._close(frame, np.flatnonzero(
+                    frame.instance_id == inst))), self.cfg.claim_min_extent_fraction):
+            return None
         est = self.estimate_pose(frame, objects, track, T_w_o_pred, kp, pts, robust_init=not track.velocity_known)
         return None if est is None else PoseProposal(est[0], kp, pts, est[1], inst)
+
+    def _outside_extent(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray,
+                        min_fraction: float) -> bool:
+        """Whether less than `min_fraction` (0: never) of an instance's close stereo points `X_w`, when >= min_inliers,
+        lie in a velocity-known vehicle track's predicted 3D extent (`BoxAssociation.extent_fraction`)."""
+        return bool(min_fraction > 0 and track.cls in VEHICLE_CLASSES and track.velocity_known
+                    and len(X_w) >= self.cfg.min_inliers
+                    and self.boxes.extent_fraction(objects, track, T_w_o_pred, [X_w])[0] < min_fraction)
 
     def _one_instance(self, frame: Frame, track: ObjectTrack, kp: np.ndarray, pts: np.ndarray, free: np.ndarray,
                       claimed: set[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -593,9 +600,12 @@ class ObjectTracker:
             T_w_o, kp_in, pt_in, info = self._mask_register(frame, objects, track, T_w_o_pred, masks, inst, box)
         else:
             T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
+        rest = ~np.isin(kp, kp_in)
         if not len(kp_in) and len(kp):
             T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
-        rest = ~np.isin(kp, kp_in)
+            if T_w_o is T_w_o_pred and self._outside_extent(objects, track, T_w_o_pred, X_w,
+                                                            self.cfg.join_points_min_extent_fraction):
+                rest[:] = False
         new = objects.add_points(track.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
                                  frame.keypoints.desc[kp[rest]], self._depth_weight(frame, kp[rest]))
         self._observe(frame, objects, track, T_w_o, np.r_[kp_in, kp[rest]], np.r_[pt_in, new], inst, box,
