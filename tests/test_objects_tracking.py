@@ -623,7 +623,8 @@ def test_box_association_falls_back_on_the_last_box_when_the_prediction_is_wrong
     rng = np.random.default_rng(10)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.3 * i, 0.8, 15.0])) for i in range(5)]
-    objects, trk = ObjectMap(), tracker("objects.filter=false", f"objects.join_points_min_extent_fraction={min_fraction}")
+    objects = ObjectMap()
+    trk = tracker("objects.filter=false", f"objects.join_points_min_extent_fraction={min_fraction}")
     e = track_alone(trk, objects, car, T_car[:4])
     tr = objects.tracks[e.track_id]
     tr.last.v_o = np.array([60.0, 0.0, 0.0])  # a wrong velocity: 6 m (~160 px) off in the next frame

@@ -31,6 +31,7 @@ its colours and the gate (`objects.appearance_reid_distance`). A tentative track
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -392,19 +393,21 @@ class ObjectTracker:
         if len(kp) < self.cfg.min_inliers:
             return None
         inst = int(frame.instance_id[kp[0]])
-        if self.cfg.claim_min_extent_fraction > 0 and self._outside_extent(
-                objects, track, T_w_o_pred, self._world_points(frame, self._close(frame, np.flatnonzero(
-                    frame.instance_id == inst))), self.cfg.claim_min_extent_fraction):
+        if self._outside_extent(objects, track, T_w_o_pred, lambda: self._world_points(frame, self._close(
+                frame, np.flatnonzero(frame.instance_id == inst))), self.cfg.claim_min_extent_fraction):
             return None
         est = self.estimate_pose(frame, objects, track, T_w_o_pred, kp, pts, robust_init=not track.velocity_known)
         return None if est is None else PoseProposal(est[0], kp, pts, est[1], inst)
 
-    def _outside_extent(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray,
-                        min_fraction: float) -> bool:
-        """Whether less than `min_fraction` (0: never) of an instance's close stereo points `X_w`, when >= min_inliers,
-        lie in a velocity-known vehicle track's predicted 3D extent (`BoxAssociation.extent_fraction`)."""
-        return bool(min_fraction > 0 and track.cls in VEHICLE_CLASSES and track.velocity_known
-                    and len(X_w) >= self.cfg.min_inliers
+    def _outside_extent(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                        world_points: Callable[[], np.ndarray], min_fraction: float) -> bool:
+        """Whether less than `min_fraction` (0: never) of an instance's close stereo points (`world_points()`, read
+        only for a velocity-known vehicle track), when >= min_inliers, lie in the track's predicted 3D extent
+        (`BoxAssociation.extent_fraction`)."""
+        if not (min_fraction > 0 and track.cls in VEHICLE_CLASSES and track.velocity_known):
+            return False
+        X_w = world_points()
+        return bool(len(X_w) >= self.cfg.min_inliers
                     and self.boxes.extent_fraction(objects, track, T_w_o_pred, [X_w])[0] < min_fraction)
 
     def _one_instance(self, frame: Frame, track: ObjectTrack, kp: np.ndarray, pts: np.ndarray, free: np.ndarray,
@@ -603,7 +606,7 @@ class ObjectTracker:
         rest = ~np.isin(kp, kp_in)
         if not len(kp_in) and len(kp):
             T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
-            if T_w_o is T_w_o_pred and self._outside_extent(objects, track, T_w_o_pred, X_w,
+            if T_w_o is T_w_o_pred and self._outside_extent(objects, track, T_w_o_pred, lambda: X_w,
                                                             self.cfg.join_points_min_extent_fraction):
                 rest[:] = False
         new = objects.add_points(track.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
