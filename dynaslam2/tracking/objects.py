@@ -594,9 +594,10 @@ class ObjectTracker:
         (`_register`; a measurement of its position for the filter, with the registration's information); the
         instance's other close keypoints become its points. Without a registration the observation is the
         prediction; a prediction that has run off (its points would land far from the track's) is re-anchored on
-        the instance first (`_reanchor`; always with `reanchor`: a track re-identified by appearance). An instance
-        with fewer than min_inliers close keypoints (coasting) adds no points; its mask measures the track's position
-        instead when it can (`masks`, `_mask_register`)."""
+        the instance first (`_reanchor`; always with `reanchor`: a track re-identified by appearance), and a vehicle's
+        instance outside its predicted extent adds no points (`_outside_extent`, join_points_min_extent_fraction). An
+        instance with fewer than min_inliers close keypoints (coasting) adds no points; its mask measures the track's
+        position instead when it can (`masks`, `_mask_register`)."""
         kp, X_w, _ = points
         if len(kp) < self.cfg.min_inliers:
             kp, X_w = kp[:0], X_w[:0]
