@@ -607,8 +607,8 @@ class ObjectTracker:
         rest = ~np.isin(kp, kp_in)
         if not len(kp_in) and len(kp):
             T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
-            if T_w_o is T_w_o_pred and self._outside_extent(objects, track, T_w_o_pred, lambda: X_w,
-                                                            self.cfg.join_points_min_extent_fraction):
+            # (a re-anchored track has forgotten its velocity, so the extent rule leaves its points alone)
+            if self._outside_extent(objects, track, T_w_o_pred, lambda: X_w, self.cfg.join_points_min_extent_fraction):
                 rest[:] = False
         new = objects.add_points(track.track_id, (X_w[rest] - T_w_o[:3, 3]) @ T_w_o[:3, :3],
                                  frame.keypoints.desc[kp[rest]], self._depth_weight(frame, kp[rest]))
