@@ -1505,3 +1505,31 @@ def test_a_coasting_track_is_measured_by_its_mask(n_keypoints, depth_error_m):
     T_off = inverse(T[0]) @ tr.observations[0].T_w_o
     for obs in tr.observations:
         assert np.linalg.norm(obs.T_w_o[:3, 3] - (T[obs.frame_index] @ T_off)[:3, 3]) < 0.1
+
+
+@pytest.mark.parametrize("kf_points_all_objects", [True, False])
+def test_a_keyframe_gives_a_tracked_object_the_points_it_shows(kf_points_all_objects):
+    """A car tracked from its rear half shows its front half at a keyframe where its tracking is not weak: with
+    objects.kf_points_all_objects the front keypoints become its points there, and a later frame that sees only the
+    front tracks it by them, yet asks for a keyframe (III-D: those points do not count as tracked in the weak
+    test); without, only weak objects gain points at keyframes."""
+    rng = np.random.default_rng(12)
+    car = Body(rng, 1001, 120, (4.0, 1.5, 1.5))
+    rear = car.X_b[:, 0] < 0.0
+    T_car = [make_pose(np.eye(3), np.array([-1.0 + 0.3 * i, 0.5, 12.0])) for i in range(5)]
+    trk = tracker("objects.filter=false", f"objects.kf_points_all_objects={kf_points_all_objects}")
+    objects = ObjectMap()
+    tid = track_alone(trk, objects, car.part(rear), T_car[:3]).track_id
+    n_rear = len(objects.points.of_track(tid))
+    frame = make_frame(3, [(car, T_car[3])])
+    result = trk.track(frame, None, objects)
+    assert tid not in result.weak
+    trk.on_keyframe(frame, 0, objects, result.weak)
+    n_added = len(objects.points.of_track(tid)) - n_rear
+    front = trk.track(make_frame(4, [(car.part(~rear), T_car[4])]), None, objects)
+    if kf_points_all_objects:
+        assert n_added >= 0.9 * np.count_nonzero(~rear)
+        assert objects.tracks[tid].last.frame_index == 4 and objects.tracks[tid].last.n_points >= 0.9 * n_added
+        assert tid in front.weak
+    else:
+        assert n_added == 0

@@ -20,7 +20,9 @@ class ObjectPoints(ColumnStore):
 
     X_o: position in the frame of object `track`; desc: ORB descriptor (the latest inlier observation);
     n_visible / n_found: projected in view / matched as an inlier (culling); alive: not culled;
-    weight: summed depth information (1/m^2) of the stereo observations averaged into X_o.
+    weight: summed depth information (1/m^2) of the stereo observations averaged into X_o; coverage: gained at a
+    keyframe where its object's tracking was not weak (objects.kf_points_all_objects), not counted as tracked in
+    the weak test.
     """
 
     COLUMNS = (
@@ -31,6 +33,7 @@ class ObjectPoints(ColumnStore):
         ("n_found", (), np.int64, 0),
         ("alive", (), bool, False),
         ("weight", (), np.float64, 0.0),
+        ("coverage", (), bool, False),
     )
 
     def __init__(self, capacity: int = 1024) -> None:

@@ -821,8 +821,9 @@ class ObjectTracker:
             obs = tr.last
             n_matches += obs.n_points
             n_features = int(np.count_nonzero(dyn & (frame.instance_id == obs.instance_id)))
+            n_tracked = int(np.count_nonzero(~objects.points.coverage[obs.pt_ids]))
             if len(tr.observations) > 1 and n_features >= self.cfg.weak_min_features \
-                    and obs.n_points < min(self.cfg.weak_max_tracked, self.cfg.weak_tracked_ratio * n_features):
+                    and n_tracked < min(self.cfg.weak_max_tracked, self.cfg.weak_tracked_ratio * n_features):
                 weak.append(tid)
         return ObjectFrameResult(self.estimates(objects, frame.index, report_coast_s=self.cfg.report_coast_s),
                                  n_matches, weak)
@@ -830,7 +831,8 @@ class ObjectTracker:
     # --------------------------------------------------------------- keyframes
     def on_keyframe(self, frame: Frame, kf_id: int, objects: ObjectMap, weak: list[int]) -> None:
         """A keyframe was made from `frame`: its object observations join BA windows, and each weakly
-        tracked object gains new points from its instance's free close keypoints (III-D)."""
+        tracked object (III-D; with objects.kf_points_all_objects every one) gains new points from its instance's free
+        close keypoints."""
         used = [o.kp_idx for tr in objects.tracks.values() if (o := tr.at_frame(frame.index)) is not None]
         free = dynamic_keypoints(frame)
         if used:
@@ -840,7 +842,7 @@ class ObjectTracker:
             if obs is None:
                 continue
             obs.kf_id = kf_id
-            if tr.track_id not in weak:
+            if tr.track_id not in weak and not self.cfg.kf_points_all_objects:
                 continue
             kp = self._close(frame, np.flatnonzero(free & (frame.instance_id == obs.instance_id)))
             if len(kp) == 0:
@@ -852,6 +854,7 @@ class ObjectTracker:
                 ok = np.linalg.norm(X_o - np.median(old, axis=0), axis=1) <= self.cfg.max_point_spread_m
                 kp, X_o = kp[ok], X_o[ok]
             new = objects.add_points(tr.track_id, X_o, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
+            objects.points.coverage[new] = tr.track_id not in weak
             obs.kp_idx = np.r_[obs.kp_idx, kp]
             obs.pt_ids = np.r_[obs.pt_ids, new]
             free[kp] = False
