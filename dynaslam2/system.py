@@ -226,12 +226,16 @@ class System:
 
     def _local_mapping(self, frame: Frame, kf, camera_weak: bool, object_weak: list[int]) -> dict[str, float]:
         """Local mapping of a new keyframe with the BA case of III-D: camera weak only -> the static
-        local BA; an object weak -> BA with objects (object-weak only: the weak objects and the
-        cameras of the last `optim.objects.tail_seconds`; both: everything jointly, after the static
-        local BA when `objects.static_ba_first`)."""
+        local BA; an object weak -> BA with objects (object-weak only: the weak objects, or with
+        `objects.ba_all_objects` every object observed at the keyframe, and the cameras of the last
+        `optim.objects.tail_seconds`; both: everything jointly, after the static local BA when
+        `objects.static_ba_first`)."""
         if self.object_tracker is None:
             return self.mapper.process(kf, self.map)
         self.object_tracker.on_keyframe(frame, kf.id, self.objects, object_weak)
+        if object_weak and self.config.objects.ba_all_objects:
+            object_weak = sorted(t for t, tr in self.objects.tracks.items()
+                                 if (o := tr.at_frame(frame.index)) is not None and o.kf_id == kf.id and len(o.pt_ids))
         with_objects = bool(object_weak) and self.config.objects.ba
         static_ba = not with_objects or (camera_weak and self.config.objects.static_ba_first)
         triangulate = camera_weak or self.config.objects.object_keyframe_triangulates

@@ -16,6 +16,7 @@ from dynaslam2.config import load_config
 from dynaslam2.eval.report import evaluate
 from dynaslam2.io.results import read_results
 from dynaslam2.io.sequence import open_sequence
+from dynaslam2.map.objects import ObjectObservation
 from dynaslam2.optim.synthetic import kitti_like_camera
 from dynaslam2.runner import run_sequence
 from dynaslam2.system import System
@@ -191,6 +192,27 @@ def test_keyframe_for_an_object_only_triangulates_no_static_points(override, exp
     for camera_weak in (True, False):
         system._local_mapping(None, types.SimpleNamespace(id=0), camera_weak, [1])
     assert calls == expected
+
+
+
+@pytest.mark.parametrize("all_objects, expected", [(False, [0]), (True, [0, 1])])
+def test_ba_with_objects_takes_the_weak_objects_or_every_object_of_the_keyframe(monkeypatch, all_objects, expected):
+    """III-D: a keyframe's BA with objects optimizes its weak objects; with objects.ba_all_objects every object
+    observed at the keyframe with points joins them (not one seen at another frame, nor one without points). A
+    keyframe without a weak object runs none either way."""
+    system = System(load_config(None, ["mode=dynamic", f"objects.ba_all_objects={all_objects}"]), kitti_like_camera())
+    system.mapper.process = lambda *args, **kwargs: {}
+    system.object_tracker.on_keyframe = lambda *args: None
+    calls = []
+    monkeypatch.setattr("dynaslam2.system.object_local_ba", lambda kf, map_, objects, weak, *args: calls.append(weak))
+    for pt_ids, kf_id, frame_index in (([5, 6], 7, 3), ([8], 7, 3), ([9], 2, 1), ([], 7, 3)):
+        track = system.objects.new_track("car")
+        track.observations.append(ObjectObservation(
+            frame_index, 0.1 * frame_index, np.eye(4), np.zeros(3), np.zeros(3), 1001, np.arange(len(pt_ids)),
+            np.array(pt_ids, dtype=np.int64), kf_id=kf_id))
+    for weak in ([0], []):
+        system._local_mapping(types.SimpleNamespace(index=3), types.SimpleNamespace(id=7), False, weak)
+    assert calls == [expected]
 
 
 def test_camera_keyframe_decision_ignores_object_only_keyframes():
