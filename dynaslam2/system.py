@@ -233,16 +233,17 @@ class System:
         if self.object_tracker is None:
             return self.mapper.process(kf, self.map)
         self.object_tracker.on_keyframe(frame, kf.id, self.objects, object_weak)
+        ba_objects = object_weak
         if object_weak and self.config.objects.ba_all_objects:
-            object_weak = sorted(t for t, tr in self.objects.tracks.items()
-                                 if (o := tr.at_frame(frame.index)) is not None and o.kf_id == kf.id and len(o.pt_ids))
-        with_objects = bool(object_weak) and self.config.objects.ba
+            ba_objects = sorted(t for t, tr in self.objects.tracks.items()
+                                if (o := tr.at_frame(frame.index)) is not None and o.kf_id == kf.id and len(o.pt_ids))
+        with_objects = bool(ba_objects) and self.config.objects.ba
         static_ba = not with_objects or (camera_weak and self.config.objects.static_ba_first)
         triangulate = camera_weak or self.config.objects.object_keyframe_triangulates
         mapping_ms = self.mapper.process(kf, self.map, static_ba=static_ba, triangulate=triangulate)
         if with_objects:
             t0 = time.perf_counter()
-            object_local_ba(kf, self.map, self.objects, object_weak, camera_weak, self.mapper, self.config)
+            object_local_ba(kf, self.map, self.objects, ba_objects, camera_weak, self.mapper, self.config)
             mapping_ms["ba"] = mapping_ms.get("ba", 0.0) + (time.perf_counter() - t0) * 1e3
         return mapping_ms
 
