@@ -235,8 +235,9 @@ class System:
         self.object_tracker.on_keyframe(frame, kf.id, self.objects, object_weak)
         ba_objects = object_weak
         if object_weak and self.config.objects.ba_all_objects:
+            # (on_keyframe has just made every observation of this frame a member of the keyframe)
             ba_objects = sorted(t for t, tr in self.objects.tracks.items()
-                                if (o := tr.at_frame(frame.index)) is not None and o.kf_id == kf.id and len(o.pt_ids))
+                                if (o := tr.at_frame(frame.index)) is not None and len(o.pt_ids))
         with_objects = bool(ba_objects) and self.config.objects.ba
         static_ba = not with_objects or (camera_weak and self.config.objects.static_ba_first)
         triangulate = camera_weak or self.config.objects.object_keyframe_triangulates

@@ -842,7 +842,8 @@ class ObjectTracker:
             if obs is None:
                 continue
             obs.kf_id = kf_id
-            if tr.track_id not in weak and not self.cfg.kf_points_all_objects:
+            is_weak = tr.track_id in weak
+            if not (is_weak or self.cfg.kf_points_all_objects):
                 continue
             kp = self._close(frame, np.flatnonzero(free & (frame.instance_id == obs.instance_id)))
             if len(kp) == 0:
@@ -854,7 +855,7 @@ class ObjectTracker:
                 ok = np.linalg.norm(X_o - np.median(old, axis=0), axis=1) <= self.cfg.max_point_spread_m
                 kp, X_o = kp[ok], X_o[ok]
             new = objects.add_points(tr.track_id, X_o, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
-            objects.points.coverage[new] = tr.track_id not in weak
+            objects.points.coverage[new] = not is_weak
             obs.kp_idx = np.r_[obs.kp_idx, kp]
             obs.pt_ids = np.r_[obs.pt_ids, new]
             free[kp] = False
