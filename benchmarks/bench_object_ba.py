@@ -65,8 +65,9 @@ def run(label: str, window, problem, cfg, repeats: int) -> float:
     return float(np.median(cpu))
 
 
-def capture(sequence: Path, out: Path) -> None:
-    """Run the dynamic mode on `sequence`, pickling every (problem, camera) passed to the object BA."""
+def capture(sequence: Path, out: Path, overrides: list[str]) -> None:
+    """Run the dynamic mode on `sequence` (config `overrides`), pickling every (problem, camera) passed to the
+    object BA."""
     import dynaslam2.mapping.objects as mapping_objects
     from dynaslam2.io.sequence import open_sequence
     from dynaslam2.system import System
@@ -79,7 +80,7 @@ def capture(sequence: Path, out: Path) -> None:
 
     mapping_objects.object_bundle_adjustment = recording  # the benchmark's own process only
     seq = open_sequence(sequence)
-    system = System(load_config(None, ["mode=dynamic"]), seq.camera)
+    system = System(load_config(None, ["mode=dynamic"] + overrides), seq.camera)
     for i in range(len(seq)):
         system.process(seq[i])
     tmp = out.with_suffix(".tmp")
@@ -120,7 +121,7 @@ def compare(windows_path: Path, spec_a: str, spec_b: str, base: list[str]) -> No
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override optim.key=value")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value (optim.* for the replays; any key for --capture)")
     parser.add_argument("--capture", type=Path, metavar="SEQ", help="save the object BA windows of a dynamic run")
     parser.add_argument("--windows", type=Path, help="file of saved windows (written by --capture)")
     parser.add_argument("--compare", nargs=2, metavar=("A", "B"), help="replay --windows under two override lists")
@@ -129,7 +130,7 @@ def main() -> None:
         if args.windows is None:
             parser.error("--capture and --compare need --windows")
         if args.capture:
-            capture(args.capture, args.windows)
+            capture(args.capture, args.windows, args.overrides)
         if args.compare:
             compare(args.windows, *args.compare, args.overrides)
         return

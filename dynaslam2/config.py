@@ -280,6 +280,12 @@ class ObjectOptimConfig:
     # cost is higher than the exact form's on 32 of 35 joint windows of traffic s0 (median +0.8 on ~4500) and the
     # cameras end 1.2 mm from the exact optimum on a synthetic window (tests: 1 mm with 1e-4).
     static_point_damping: float = 1e-4
+    # eq. (2) (object reprojection) of each object linearized at each LM stage's start (Huber weights there) and
+    # reduced to its observations' poses by eliminating its points (optim/object_ba.py `_object_reduction`,
+    # static_schur.py, each point block damped by static_point_damping), the points following by
+    # back-substitution after the stage; False: every object point a gtsam variable (the exact form).
+    # "camera_in_object" only.
+    object_points_reduced: bool = False
     tail_seconds: float = 2.0  # object-weak BA (III-D): keyframes within this time of the newest are free
 
     def validate(self) -> None:
@@ -295,6 +301,9 @@ class ObjectOptimConfig:
             raise ConfigError(f"optim.objects.disparity_weight: expected >= 0, got {self.disparity_weight}")
         if not self.lambda_initial > 0:
             raise ConfigError(f"optim.objects.lambda_initial: expected > 0, got {self.lambda_initial}")
+        if self.object_points_reduced and self.parametrization != "camera_in_object":
+            raise ConfigError("optim.objects.object_points_reduced: needs parametrization=camera_in_object, got "
+                              f"{self.parametrization}")
         if not self.static_point_damping > 0:
             raise ConfigError(f"optim.objects.static_point_damping: expected > 0, got {self.static_point_damping}")
 

@@ -379,6 +379,34 @@ def test_reduced_static_terms_near_the_optimum_reach_the_exact_joint_optimum(see
 
 
 @pytest.mark.parametrize("seed", [6, 7])
+def test_reduced_object_points_near_the_optimum_reach_the_exact_joint_optimum(seed):
+    """optim.objects.object_points_reduced: eq. (2) linearized at each stage's start and reduced to the object
+    poses (the object points eliminated, then back-substituted). From a window at its exact optimum but for
+    the objects of the newest keyframe, 2 cm / 0.3 deg off as from tracking: cameras, object poses and the
+    inlier object points within 1 mm of the exact optimum, the object points no gtsam variables."""
+    w = window(seed, n_static=400, n_object_points=40, outlier_fraction=0.03, noise_scale=0.5)
+    p = w.problem
+    exact_cfg = OptimConfig(ba_relative_error_tol=0.0, ba_iterations_robust=30, ba_iterations_refine=30)
+    optimum = object_bundle_adjustment(p, CAMERA, exact_cfg)
+    rng = np.random.default_rng(seed)
+    T_w_o = optimum.T_w_o.copy()
+    for f in np.flatnonzero(p.obj_frames == np.flatnonzero(~p.fixed)[-1]):
+        T_w_o[f] = T_w_o[f] @ se3_exp(np.concatenate([rng.normal(0.0, 0.005, 3), rng.normal(0.0, 0.02, 3)]))
+    keep = optimum.inlier
+    start = dataclasses.replace(p, T_c_w=optimum.T_c_w, X_w=optimum.X_w, T_w_o=T_w_o, v_o=optimum.v_o,
+                                w_o=optimum.w_o, X_o=optimum.X_o, obs_kf=p.obs_kf[keep], obs_pt=p.obs_pt[keep],
+                                meas=p.meas[keep], inv_sigma2=p.inv_sigma2[keep])
+    exact = object_bundle_adjustment(start, CAMERA, exact_cfg)
+    reduced = object_bundle_adjustment(start, CAMERA, OptimConfig(objects=ObjectOptimConfig(object_points_reduced=True)))
+    assert np.abs(inverse(reduced.T_c_w)[:, :3, 3] - inverse(exact.T_c_w)[:, :3, 3]).max() < 1e-3
+    assert np.abs(reduced.T_w_o[:, :3, 3] - exact.T_w_o[:, :3, 3]).max() < 1e-3
+    inlier_points = np.bincount(p.oobs_pt[exact.obj_inlier], minlength=len(p.X_o)) > 0
+    assert np.abs(reduced.X_o - exact.X_o)[inlier_points].max() < 1e-3
+    assert np.abs(T_w_o[:, :3, 3] - exact.T_w_o[:, :3, 3]).max() > 0.01  # (the start was off)
+    assert reduced.n_parameters["object_point"] == 0 and exact.n_parameters["object_point"] > 0
+
+
+@pytest.mark.parametrize("seed", [6, 7])
 def test_noisy_window_recovers_object_motion(seed):
     """Noisy stereo measurements (0.5 px at level 0, x1.2 per level) with 5% outliers, static points
     4-25 m and objects 6-12 m ahead: object poses within 2 cm / 0.2 deg (median over the free

@@ -52,6 +52,16 @@ s0) the reduced form ends ~4x closer to the converged exact optimum than the exa
 ORB-SLAM2's iteration budget (cameras: median 0.6 / 0.4 mm against 2.5 / 1.8 mm; final cost median
 2.6 / 2.2 against 4.3 / 4.6 above the converged one). End to end the two are equally accurate (config.py).
 
+With `cfg.objects.object_points_reduced` (opt-in), eq. (2) is reduced the same way to the object
+observations' poses Q (the observations as static_schur's cameras, the object points eliminated, one
+factor per object: no point is seen from two objects), relinearized at each stage's start (the objects
+move more than the cameras between the two stages), the points following by back-substitution after each
+stage. Near the optimum it reaches the exact one (tests/test_object_ba.py); on the 71 windows of traffic s0
+with every object in the BA (objects.kf_points_all_objects and ba_all_objects: ~5 objects, ~650 object
+points, ~2300 object observations per window) it takes 0.80x the CPU time of the object points as gtsam
+variables with a lower summed final cost (344149 against 344289); on the default's 45 windows (~100
+object points) it changes neither (0.98x).
+
 Cost (this shared 2-core machine under load ~9, CPU time; windows saved by `bench_object_ba.py
 --capture` from 640x480 150-frame dynamic runs, replayed with `--compare` interleaved in one process).
 Joint windows (up to 30 keyframes, ~4000 static points, ~20k static and 20-600 object observations),
@@ -103,7 +113,8 @@ from dynaslam2.optim.object_factors import (
     direct_projection_factor,
     motion_factor,
     motion_factor_object,
-    motion_residuals,
+    motion_affine,
+    motion_cost,
 )
 from dynaslam2.optim.pose_only import pose_only_factor
 from dynaslam2.optim.reprojection import chi2_depth, chi2_thresholds, huber_cost, is_stereo
@@ -229,8 +240,11 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
         if n_iter == 0:
             continue
         t_build = time.perf_counter()
-        graph, values, keys, ordering = _build(problem, est, fixed, use, structure, robust, camera, cfg,
-                                               None if schur is None else (schur, T_w_c0))
+        held = _held_observations(problem, structure, fixed)
+        object_schur = (_object_reduction(problem, est, structure, held, th_o if robust else None, camera, cfg)
+                        if cfg.objects.object_points_reduced else None)
+        graph, values, keys, ordering = _build(problem, est, fixed, use, structure, held, robust, camera, cfg,
+                                               None if schur is None else (schur, T_w_c0), object_schur)
         if not n_parameters:
             n_parameters = {name: int(len(members) * dof) for name, (members, _, dof) in keys.items()}
         if graph.size() == 0:
@@ -243,11 +257,14 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
         timings_ms["solve"] += 1e3 * (time.perf_counter() - t_solve)
         iterations += optimizer.iterations()
         _read_back(values, keys, problem, cfg, est)
+        if object_schur is not None:  # the object points by back-substitution from this stage's start
+            object_reduced, Q0 = object_schur
+            Q = inverse(est.T_c_w[problem.obj_frames[object_reduced.cams]] @ est.T_w_o[object_reduced.cams])
+            est.X_o[object_reduced.points] += object_reduced.point_steps(_local_coordinates(Q0, Q))
 
     if schur is not None:  # the static points by back-substitution from the start (unused between stages)
-        d_cams = np.array([gtsam.Pose3(T0).localCoordinates(gtsam.Pose3(T))
-                           for T0, T in zip(T_w_c0, inverse(est.T_c_w[schur.cams]))]).reshape(-1, 6)
-        est.X_w[schur.points] = X_w0[schur.points] + schur.point_steps(d_cams)
+        est.X_w[schur.points] = X_w0[schur.points] + schur.point_steps(
+            _local_coordinates(T_w_c0, inverse(est.T_c_w[schur.cams])))
     est.T_c_w[fixed] = problem.T_c_w[fixed]
     c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
     c2_o, depth_o = _object_chi2_depth(problem, est, camera, cfg)
@@ -307,12 +324,52 @@ def _object_structure(problem: ObjectBAProblem, use_o: np.ndarray, min_points: i
     return _ObjectStructure(obs, points, use, pair_a, pair_b, pair_dt, moving)
 
 
+def _held_observations(problem: ObjectBAProblem, st: _ObjectStructure, fixed: np.ndarray) -> np.ndarray:
+    """(F,) bool: the object observations whose pose is held (strong prior), the gauge of each object frame:
+    its observations at fixed keyframes, or when it has none, its earliest one in the window."""
+    held = st.obs & fixed[problem.obj_frames]
+    for k in np.unique(problem.obj_id[st.obs & ~held]).tolist():
+        mine = np.flatnonzero(st.obs & (problem.obj_id == k))
+        if not held[mine].any():
+            held[mine[np.argmin(problem.timestamps[problem.obj_frames[mine]])]] = True
+    return held
+
+
+def _object_reduction(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, held: np.ndarray,
+                      delta2: np.ndarray | None, camera: StereoCamera,
+                      cfg: OptimConfig) -> tuple[StaticSchur, np.ndarray] | None:
+    """eq. (2) linearized at the current estimate (Huber weights there; `delta2`: (M2,) deltas^2, None: no
+    kernel) and reduced to the poses Q = T_o_c of the free object observations by eliminating the object
+    points (`cfg.objects.object_points_reduced`), as the static terms to the cameras (static_schur.py, the
+    observations as its cameras, each point block damped by `static_point_damping`); the held
+    observations are constants there. No point is seen from two objects: the system is block-diagonal
+    per object (`StaticSchur.factors`). Returns the reduction and Q at the linearization point (None
+    when no observation is free)."""
+    T_c_o = est.T_c_w[problem.obj_frames] @ est.T_w_o
+    free = st.obs & ~held & (np.bincount(problem.oobs_f[st.use], minlength=len(held)) > 0)
+    if not free.any():
+        return None
+    use = st.use
+    reduced = static_schur(T_c_o, free, est.X_o, problem.oobs_f[use], problem.oobs_pt[use], problem.oobs_meas[use],
+                           problem.oobs_inv_sigma2[use], camera, cfg.min_depth, None if delta2 is None else delta2[use],
+                           cfg.objects.static_point_damping, _disparity_weight(cfg))
+    return reduced, inverse(T_c_o[reduced.cams])
+
+
+def _local_coordinates(T0: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """(n, 6) Local(T0_i, T_i) = Log(T0_i^-1 T_i), gtsam's (omega, nu) order."""
+    return np.array([gtsam.Pose3(a).localCoordinates(gtsam.Pose3(b)) for a, b in zip(T0, T)]).reshape(-1, 6)
+
+
 def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.ndarray, st: _ObjectStructure,
-           robust: bool, camera: StereoCamera, cfg: OptimConfig,
-           reduced: tuple[StaticSchur, np.ndarray] | None = None):
+           held: np.ndarray, robust: bool, camera: StereoCamera, cfg: OptimConfig,
+           reduced: tuple[StaticSchur, np.ndarray] | None = None,
+           object_reduced: tuple[StaticSchur, np.ndarray] | None = None):
     """Graph, initial values, {block: (member indices, their keys, dof)}, SCHUR elimination order.
-    `reduced`: the static terms as their reduced camera system (and its linearization point T_w_c)
-    instead of static point variables and eq. (1) factors."""
+    `held`: the object observations whose pose is held (`_held_observations`). `reduced`: the static terms
+    as their reduced camera system (and its linearization point T_w_c) instead of static point variables
+    and eq. (1) factors; `object_reduced`: eq. (2) likewise per object (`_object_reduction`), the object
+    points then no variables."""
     ocfg = cfg.objects
     direct = ocfg.parametrization == "direct"
     disparity_weight = _disparity_weight(cfg)
@@ -335,12 +392,13 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
     used_kf |= np.bincount(problem.obj_frames[st.obs], minlength=K) > 0
     cams = np.flatnonzero(used_kf | fixed)
     obs_idx, moving_idx, obj_pts = np.flatnonzero(st.obs), np.flatnonzero(st.moving), np.flatnonzero(st.points)
+    point_vars = obj_pts if object_reduced is None else obj_pts[:0]  # (eq. 4 reads every point, as constants)
     cam_keys, obs_keys, spt_keys, opt_keys, vel_keys = allocate_keys(len(cams), len(obs_idx), len(static_pts),
-                                                                    len(obj_pts), len(moving_idx))
+                                                                    len(point_vars), len(moving_idx))
     cam_key = _key_map(K, cams, cam_keys)
     obs_key = _key_map(len(est.T_w_o), obs_idx, obs_keys)
     spt_key = _key_map(len(est.X_w), static_pts, spt_keys)
-    opt_key = _key_map(len(est.X_o), obj_pts, opt_keys)
+    opt_key = _key_map(len(est.X_o), point_vars, opt_keys)
     vel_key = _key_map(len(est.T_w_o), moving_idx, vel_keys)
 
     values = gtsam.Values()
@@ -349,7 +407,7 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
     obj_frame = problem.obj_frames[obs_idx]
     insert_poses(values, obs_keys, est.T_w_o[obs_idx] if direct else inverse(est.T_w_o[obs_idx]) @ T_w_c[obj_frame])
     insert_points(values, spt_keys, est.X_w[static_pts])
-    insert_points(values, opt_keys, est.X_o[obj_pts])
+    insert_points(values, opt_keys, est.X_o[point_vars])
     for key, velocity in zip(vel_keys.tolist(), est.velocity[moving_idx]):
         values.insert(key, velocity)
 
@@ -379,6 +437,10 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
                 int(cam_key[problem.obj_frames[f]]), int(obs_key[f]), opt_key[problem.oobs_pt[sel]],
                 problem.oobs_meas[sel], problem.oobs_inv_sigma2[sel], camera, delta_mono, delta_stereo,
                 disparity_weight))
+    elif object_reduced is not None:
+        object_schur, Q0 = object_reduced
+        for factor in object_schur.factors(obs_key[object_schur.cams], Q0, problem.obj_id[object_schur.cams]):
+            graph.push_back(factor)
     elif st.use.any():
         # (both stages as GenericStereoFactor3D with the disparity model: the C++-built pairs cannot correlate)
         obj_args = (graph, obs_key[problem.oobs_f[st.use]], opt_key[problem.oobs_pt[st.use]], problem.oobs_meas[st.use],
@@ -388,14 +450,8 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
         else:
             add_stereo_factors(*obj_args, disparity_weight=disparity_weight)
     # gauge of each object frame
-    anchored = st.obs & fixed[problem.obj_frames]
-    for k in np.unique(problem.obj_id[obs_idx]).tolist():
-        mine = obs_idx[problem.obj_id[obs_idx] == k]
-        held = mine[anchored[mine]]
-        if len(held) == 0:
-            held = mine[np.argmin(problem.timestamps[problem.obj_frames[mine]])][None]
-        for f in held.tolist():
-            graph.addPriorPose3(int(obs_key[f]), values.atPose3(int(obs_key[f])), prior)
+    for f in np.flatnonzero(held).tolist():
+        graph.addPriorPose3(int(obs_key[f]), values.atPose3(int(obs_key[f])), prior)
     # eq. (3) and eq. (4)-(5), per object per consecutive pair of observations
     huber_velocity = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(ocfg.chi2_velocity))
     motion_keys = np.column_stack([obs_key[st.pair_a], obs_key[st.pair_b], vel_key[st.pair_a]]) if direct else \
@@ -420,7 +476,7 @@ def _build(problem: ObjectBAProblem, est: _Estimate, fixed: np.ndarray, use: np.
                                           ocfg.chi2_motion, **({"point_keys": opt_key[pts]} if ocfg.motion_points_variable
                                                                else {"X_o": est.X_o[pts].copy()})))
     keys = {"camera": (cams, cam_keys, 6), "object_pose": (obs_idx, obs_keys, 6),
-            "static_point": (static_pts, spt_keys, 3), "object_point": (obj_pts, opt_keys, 3),
+            "static_point": (static_pts, spt_keys, 3), "object_point": (point_vars, opt_keys, 3),
             "velocity": (moving_idx, vel_keys, 6)}
     # points, then each object's velocities and poses (a clique per object), then the cameras
     object_keys = np.concatenate([vel_keys, obs_keys])
@@ -468,7 +524,7 @@ def _read_back(values: gtsam.Values, keys: dict, problem: ObjectBAProblem,
     # non-3 Vector value (the velocities) after them
     points = extract_points(values)[:len(static_pts) + len(obj_pts)]
     est.X_w[static_pts] = points[:len(static_pts)]
-    est.X_o[obj_pts] = points[len(static_pts):]
+    est.X_o[obj_pts] = points[len(static_pts):]  # (none when `_object_reduction` eliminated them)
     if len(moving_idx):
         est.velocity[moving_idx] = np.array([values.atVector(k) for k in vel_keys.tolist()])
 
@@ -497,13 +553,17 @@ def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, 
     if c2_o is None:
         c2_o, _ = _object_chi2_depth(problem, est, camera, cfg)
     cost += huber_cost(c2_o, chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo))[st.use].sum()
-    for a, b, dt in zip(st.pair_a.tolist(), st.pair_b.tolist(), st.pair_dt.tolist()):
-        sigmas = np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3)
-        r = (est.velocity[b] - est.velocity[a]) / sigmas
-        cost += huber_cost(np.array([r @ r]), ocfg.chi2_velocity)[0]
-        pts = st.points & (problem.pt_obj == problem.obj_id[a])
-        e = motion_residuals(est.T_w_o[a], est.T_w_o[b], est.velocity[a], dt, est.X_o[pts])[0]
-        cost += huber_cost(np.einsum("ij,ij->i", e, e) / (ocfg.sigma_motion_xyz * dt) ** 2, ocfg.chi2_motion).sum()
+    a, b, dt = st.pair_a, st.pair_b, st.pair_dt
+    r = (est.velocity[b] - est.velocity[a]) / np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3,
+                                                        axis=0).T
+    cost += huber_cost(np.einsum("ij,ij->i", r, r), ocfg.chi2_velocity).sum()
+    M, _, _ = motion_affine(est.T_w_o[a, :3, :3], est.T_w_o[a, :3, 3], est.T_w_o[b, :3, :3], est.T_w_o[b, :3, 3],
+                            est.velocity[a], dt)
+    pair_obj = problem.obj_id[a]
+    for k in np.unique(pair_obj).tolist():
+        mine = pair_obj == k
+        cost += motion_cost(M[mine], ocfg.sigma_motion_xyz * dt[mine], est.X_o[st.points & (problem.pt_obj == k)],
+                            ocfg.chi2_motion)
     return float(cost)
 
 

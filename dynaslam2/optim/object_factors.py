@@ -91,6 +91,23 @@ def motion_residuals(
     return e, J[0], J[1], J[2], J_x
 
 
+def motion_affine(R_a: np.ndarray, t_a: np.ndarray, R_b: np.ndarray, t_b: np.ndarray, velocity_a: np.ndarray,
+                  dt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. (4) of R frame pairs as affine maps of the point: e_j = A x_j + c, returned as M = [A c] (R, 3, 4),
+    with R_a dR(w_a dt) (R, 3, 3) and R_a v_a dt (R, 3) (eq. 5), for poses (R_a, t_a), (R_b, t_b), velocities
+    (R, 6) and dt (R,)."""
+    R_ad = R_a @ so3_exp(velocity_a[:, 3:] * dt[:, None])
+    a_v = np.einsum("rij,rj->ri", R_a, velocity_a[:, :3] * dt[:, None])
+    return np.concatenate([R_b - R_ad, (t_b - t_a - a_v)[:, :, None]], axis=2), R_ad, a_v
+
+
+def motion_cost(M: np.ndarray, sigma: np.ndarray, X_o: np.ndarray, huber_delta2: float | None) -> float:
+    """Summed Huber cost of eq. (4) over R pairs (`motion_affine`'s M, sigma (R,)) and the points X_o (n, 3)."""
+    e = np.einsum("nl,ril->rni", np.hstack([X_o, np.ones((len(X_o), 1))]), M / sigma[:, None, None])
+    c2 = np.einsum("rni,rni->rn", e, e)
+    return float(0.5 * c2.sum() if huber_delta2 is None else huber_cost(c2, huber_delta2).sum())
+
+
 def _compose_inverse(T_w_c: np.ndarray, Q: np.ndarray) -> np.ndarray:
     """T_w_c Q^-1 for (4, 4) rigid transforms."""
     T = np.eye(4)
@@ -209,18 +226,14 @@ def motion_factor_object(
         else:
             R_wo, t_wo = T[..., :3, :3], T[..., :3, 3]
         R_a, R_b, t_a, t_b = R_wo[:, 0], R_wo[:, 1], t_wo[:, 0], t_wo[:, 1]
-        v_dt = velocity[:, :3] * dt[:, None]
-        w_dt = velocity[:, 3:] * dt[:, None]
-        R_ad = R_a @ so3_exp(w_dt)
-        a_v = np.einsum("rij,rj->ri", R_a, v_dt)
-        M = np.concatenate([R_b - R_ad, (t_b - t_a - a_v)[:, :, None]], axis=2) / sigma[:, None, None]  # [A c]
+        M, R_ad, a_v = motion_affine(R_a, t_a, R_b, t_b, velocity, dt)
+        if H is None:
+            r = np.zeros(12 * R)
+            r[0] = np.sqrt(2.0 * motion_cost(M, sigma, X_o, huber_delta2))
+            return r
+        M = M / sigma[:, None, None]  # [A c], whitened
         e = np.einsum("nl,ril->rni", X_h, M)
         c2 = np.einsum("rni,rni->rn", e, e)
-        if H is None:
-            cost2 = c2.sum() if huber_delta2 is None else 2.0 * huber_cost(c2, huber_delta2).sum()
-            r = np.zeros(12 * R)
-            r[0] = np.sqrt(cost2)
-            return r
         w = huber_scale(c2, huber_delta2, True) ** 2
         lam, U = np.linalg.eigh(np.einsum("nl,rn,nm->rlm", X_h, w, X_h))
         L = U * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
@@ -231,7 +244,8 @@ def motion_factor_object(
         G[0, :, 3, :, 3:] = -R_a
         G[1, :, :3, :, :3] = -hat(np.swapaxes(R_b, 1, 2)) @ R_b[:, None]
         G[1, :, 3, :, 3:] = R_b
-        G[2, :, :3, :, 3:] = hat(np.swapaxes(R_ad, 1, 2)) @ (R_ad @ so3_right_jacobian(w_dt) * dt[:, None, None])[:, None]
+        G[2, :, :3, :, 3:] = (hat(np.swapaxes(R_ad, 1, 2))
+                              @ (R_ad @ so3_right_jacobian(velocity[:, 3:] * dt[:, None]) * dt[:, None, None])[:, None])
         G[2, :, 3, :, :3] = -R_a * dt[:, None, None]
         B = np.einsum("rlk,grlij->grkij", L, G).reshape(3, R, 12, 6) / sigma[None, :, None, None]
         blocks = np.zeros((len(keys), R, 12, 6))

@@ -19,7 +19,6 @@ the static terms linearized once, the points following by back-substitution.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import gtsam
 import numpy as np
@@ -28,7 +27,7 @@ from scipy.linalg import solve_triangular
 
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.optim.gtsam_utils import pose3_from_matrix
-from dynaslam2.optim.reprojection import is_stereo, residuals
+from dynaslam2.optim.reprojection import disparity_residuals, is_stereo, residuals
 
 
 @dataclass
@@ -46,44 +45,27 @@ class StaticSchur:
     W: np.ndarray  # (6, 3, M') H_cp block of each such observation
     cost: float  # 1/2 sum of the whitened, Huber-weighted squared residuals at the linearization point
 
-    @cached_property
-    def _square_root(self) -> tuple[np.ndarray, np.ndarray]:
-        """(A, b) with A^T A = S, -A^T b = s: A = L^T for S = L L^T (S is positive definite when the fixed
-        cameras hold the gauge); else from the eigen-decomposition of S, its null space dropped (eigh
-        costs ~100x the Cholesky factorization with multithreaded OpenBLAS on a loaded machine)."""
-        S = 0.5 * (self.S + self.S.T)
-        try:
-            L = np.linalg.cholesky(S)
-            return L.T, -solve_triangular(L, self.s, lower=True)
-        except np.linalg.LinAlgError:
-            lam, V = np.linalg.eigh(S)
-            keep = lam > max(lam[-1], 0.0) * 1e-12
-            return np.sqrt(lam[keep])[:, None] * V[:, keep].T, -(V[:, keep].T @ self.s) / np.sqrt(lam[keep])
-
     def factor(self, keys: np.ndarray, T_w_c: np.ndarray) -> gtsam.CustomFactor:
         """One factor on the free cameras' Pose3 keys (`keys[i]` = camera `cams[i]` at `T_w_c[i]`, the
-        linearization point): error (A d - b, floor) with A^T A = S, -A^T b = s (`_square_root`) and d =
+        linearization point): error (A d - b, floor) with A^T A = S, -A^T b = s (`square_root`) and d =
         Local(T_w_c, pose) per camera; half its squared norm is the quadratic model of the static cost."""
-        A, b = self._square_root
-        # the model's minimum as a constant row: the factor's error is the whole quadratic model of the
-        # static cost, 1/2 |A d - b|^2 + cost - 1/2 |b|^2, so that LM's relative decrease is on the full cost
-        floor = np.sqrt(2.0 * max(self.cost - 0.5 * b @ b, 0.0))
-        blocks = [np.ascontiguousarray(A[:, 6 * i:6 * i + 6]) for i in range(len(keys))]
-        lin = [pose3_from_matrix(T) for T in T_w_c]
-        key_list = [int(k) for k in keys]
+        return self.factors(keys, T_w_c, np.zeros(len(self.cams), dtype=np.int64))[0]
 
-        def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
-            d = np.empty(6 * len(key_list))
-            for i, (key, T0) in enumerate(zip(key_list, lin)):
-                if H is None:
-                    d[6 * i:6 * i + 6] = T0.localCoordinates(values.atPose3(key))
-                else:
-                    J = np.zeros((6, 6), order="F")
-                    d[6 * i:6 * i + 6] = T0.localCoordinates(values.atPose3(key), None, J)
-                    H[i] = np.vstack([blocks[i] @ J, np.zeros((1, 6))])
-            return np.append(A @ d - b, floor)
-
-        return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(len(b) + 1), key_list, error)
+    def factors(self, keys: np.ndarray, T_w_c: np.ndarray, groups: np.ndarray) -> list[gtsam.CustomFactor]:
+        """`factor` split into one factor per group of cameras (`groups`: (C,) label of each camera of `cams`),
+        for groups that see no point in common (S is zero between them: the objects of eq. 2): the same
+        quadratic model, and gtsam's elimination keeps the groups apart. The model's constant row rides on
+        the first factor."""
+        systems = []
+        for g in np.unique(groups).tolist():
+            sel = np.flatnonzero(groups == g)
+            idx = (6 * sel[:, None] + np.arange(6)).ravel()
+            systems.append((sel, *square_root(self.S[np.ix_(idx, idx)], self.s[idx])))
+        # the model's minimum as a constant row: the factors' error is the whole quadratic model of the
+        # cost, 1/2 sum |A d - b|^2 + cost - 1/2 sum |b|^2, so that LM's relative decrease is on the full cost
+        floor = np.sqrt(2.0 * max(self.cost - 0.5 * sum(b @ b for _, _, b in systems), 0.0))
+        return [_quadratic_factor(A, b, floor if i == 0 else None, keys[sel], T_w_c[sel])
+                for i, (sel, A, b) in enumerate(systems)]
 
     def point_steps(self, d_cams: np.ndarray) -> np.ndarray:
         """(P', 3) point increments for (C, 6) camera increments: -H_pp^-1 (g_p + sum H_pc d_c)."""
@@ -91,6 +73,43 @@ class StaticSchur:
         Wd = [(self.W[:, j] * d).sum(axis=0) for j in range(3)]
         rhs = self.g_p + np.array([np.bincount(self.obs_point, Wd[j], len(self.points)) for j in range(3)])
         return -_cholesky3_solve(self.L_pp, rhs).T
+
+
+def square_root(S: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A, b) with A^T A = S, -A^T b = s: A = L^T for S = L L^T (S is positive definite when the fixed
+    cameras hold the gauge); else from the eigen-decomposition of S, its null space dropped (eigh
+    costs ~100x the Cholesky factorization with multithreaded OpenBLAS on a loaded machine)."""
+    S = 0.5 * (S + S.T)
+    try:
+        L = np.linalg.cholesky(S)
+        return L.T, -solve_triangular(L, s, lower=True)
+    except np.linalg.LinAlgError:
+        lam, V = np.linalg.eigh(S)
+        keep = lam > max(lam[-1], 0.0) * 1e-12
+        return np.sqrt(lam[keep])[:, None] * V[:, keep].T, -(V[:, keep].T @ s) / np.sqrt(lam[keep])
+
+
+def _quadratic_factor(A: np.ndarray, b: np.ndarray, floor: float | None, keys: np.ndarray,
+                      T_w_c: np.ndarray) -> gtsam.CustomFactor:
+    """A factor on Pose3 `keys` linearized at `T_w_c`: error (A d - b[, floor]), d = Local(T_w_c, pose) per key."""
+    blocks = [np.ascontiguousarray(A[:, 6 * i:6 * i + 6]) for i in range(len(keys))]
+    lin = [pose3_from_matrix(T) for T in T_w_c]
+    key_list = [int(k) for k in keys]
+    tail = np.zeros((0 if floor is None else 1, 6))
+    constant = np.array([] if floor is None else [floor])
+
+    def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+        d = np.empty(6 * len(key_list))
+        for i, (key, T0) in enumerate(zip(key_list, lin)):
+            if H is None:
+                d[6 * i:6 * i + 6] = T0.localCoordinates(values.atPose3(key))
+            else:
+                J = np.zeros((6, 6), order="F")
+                d[6 * i:6 * i + 6] = T0.localCoordinates(values.atPose3(key), None, J)
+                H[i] = np.vstack([blocks[i] @ J, tail])
+        return np.append(A @ d - b, constant)
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(len(b) + len(constant)), key_list, error)
 
 
 @dataclass
@@ -113,13 +132,16 @@ class StaticLinearization:
 
 def linearize_static(T_c_w: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
                      meas: np.ndarray, inv_sigma2: np.ndarray, camera: StereoCamera, min_depth: float,
-                     delta2: np.ndarray | None) -> StaticLinearization:
+                     delta2: np.ndarray | None, disparity_weight: float | None = None) -> StaticLinearization:
     """Linearize the given observations at (T_c_w, X_w), with Huber weights as gtsam's Robust model
     (`delta2`: (M,) delta^2 per observation; None: no kernel). Observations closer than `min_depth`
-    contribute nothing."""
+    contribute nothing. `disparity_weight` k: stereo rows [u, v, k disparity] (`disparity_residuals`, the
+    object terms of eq. 2) instead of [u, v, u_right]."""
     R, t = T_c_w[obs_kf, :3, :3], T_c_w[obs_kf, :3, 3]
     X_c = np.einsum("mij,mj->mi", R, X_w[obs_pt]) + t
     r = residuals(camera, X_c, meas)
+    if disparity_weight is not None:
+        r = disparity_residuals(r, meas, disparity_weight)
     x, y, z = X_c.T
     ok = z > min_depth
     inv_z = 1.0 / np.where(ok, z, 1.0)
@@ -146,6 +168,8 @@ def linearize_static(T_c_w: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs
     J_t[6:, 0] = a * R_t[0] + c * R_t[2]
     J_t[6:, 1] = b * R_t[1] + d * R_t[2]
     J_t[6:, 2] = a2 * R_t[0] + e * R_t[2]
+    if disparity_weight is not None:  # the third row: k (u - u_right), linear in the rows above
+        J_t[:, 2] = np.where(stereo, disparity_weight * (J_t[:, 0] - J_t[:, 2]), 0.0)
     r = sw[:, None] * r
     return StaticLinearization(obs_kf, obs_pt, J_t, r, 0.5 * float(np.einsum("ij,ij->", r, r)))
 
@@ -241,10 +265,11 @@ def _cholesky3_solve(L: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def static_schur(T_c_w: np.ndarray, free: np.ndarray, X_w: np.ndarray, obs_kf: np.ndarray, obs_pt: np.ndarray,
                  meas: np.ndarray, inv_sigma2: np.ndarray, camera: StereoCamera, min_depth: float,
-                 delta2: np.ndarray | None, damping: float) -> StaticSchur:
+                 delta2: np.ndarray | None, damping: float, disparity_weight: float | None = None) -> StaticSchur:
     """`linearize_static` then `reduce_static`: the static terms at (T_c_w, X_w) reduced to the free
     cameras, each point's block damped by `damping` (the points take one step: far points, depth
     information ~1e-6 at a few hundred metres, would otherwise jump by their depth for a millimetre of
     camera motion)."""
-    lin = linearize_static(T_c_w, X_w, obs_kf, obs_pt, meas, inv_sigma2, camera, min_depth, delta2)
+    lin = linearize_static(T_c_w, X_w, obs_kf, obs_pt, meas, inv_sigma2, camera, min_depth, delta2,
+                           disparity_weight)
     return reduce_static(lin, free, damping)
