@@ -145,6 +145,9 @@ class ObjectBAProblem(BAProblem):
     oobs_inv_sigma2: np.ndarray  # (M2,)
     optimize_static: bool = True  # static points are variables (else constants constraining the cameras)
     optimize_objects: bool = True  # object poses, velocities and points are variables (else untouched)
+    # (F,) bool or None: observations whose pose is held (Q = T_o_c in "camera_in_object", T_w_o in "direct") and
+    # velocity kept, no eq. (3)-(4) term: objects of which only the points are refined (eq. 2)
+    pose_held: np.ndarray | None = None
 
 
 @dataclass
@@ -297,6 +300,7 @@ def _object_structure(problem: ObjectBAProblem, use_o: np.ndarray, min_points: i
     at least one such observation is a variable: one with fewer terms follows the motion model (eq. 3-5)
     through its neighbours in time. Pairs: consecutive observations of each object."""
     F, P2 = len(problem.obj_frames), len(problem.X_o)
+    pose_held = np.zeros(F, dtype=bool) if problem.pose_held is None else problem.pose_held
     stereo = is_stereo(problem.oobs_meas)
     strong = np.ones(F, dtype=bool)
     for _ in range(4):  # observations and points determine each other; a few passes reach the fixed point
@@ -314,7 +318,7 @@ def _object_structure(problem: ObjectBAProblem, use_o: np.ndarray, min_points: i
     tracked = np.zeros(int(problem.obj_id.max(initial=-1)) + 1, dtype=bool)
     tracked[problem.obj_id[strong]] = True
     obs = tracked[problem.obj_id]
-    idx = np.flatnonzero(obs)
+    idx = np.flatnonzero(obs & ~pose_held)
     order = idx[np.lexsort((problem.timestamps[problem.obj_frames[idx]], problem.obj_id[idx]))]
     same = problem.obj_id[order[1:]] == problem.obj_id[order[:-1]]
     pair_a, pair_b = order[:-1][same], order[1:][same]
@@ -326,8 +330,11 @@ def _object_structure(problem: ObjectBAProblem, use_o: np.ndarray, min_points: i
 
 def _held_observations(problem: ObjectBAProblem, st: _ObjectStructure, fixed: np.ndarray) -> np.ndarray:
     """(F,) bool: the object observations whose pose is held (strong prior), the gauge of each object frame:
-    its observations at fixed keyframes, or when it has none, its earliest one in the window."""
+    its observations at fixed keyframes, or when it has none, its earliest one in the window; and the
+    problem's `pose_held` ones."""
     held = st.obs & fixed[problem.obj_frames]
+    if problem.pose_held is not None:
+        held |= st.obs & problem.pose_held
     for k in np.unique(problem.obj_id[st.obs & ~held]).tolist():
         mine = np.flatnonzero(st.obs & (problem.obj_id == k))
         if not held[mine].any():
@@ -601,5 +608,10 @@ def _check(problem: ObjectBAProblem) -> None:
             and np.all(problem.oobs_inv_sigma2 > 0)):
         raise InputError("object_bundle_adjustment: poses, points, velocities, times and measurements must be "
                          "finite, inv_sigma2 > 0")
+    if problem.pose_held is not None and (
+            problem.pose_held.shape != (F,)
+            or np.any(np.bincount(problem.obj_id, problem.pose_held) % np.bincount(problem.obj_id) != 0)):
+        raise InputError("object_bundle_adjustment: pose_held must be (F,) bool, all or none of each object's "
+                         "observations")
     if len(np.unique(problem.timestamps)) != K:
         raise InputError("object_bundle_adjustment: the keyframe timestamps must be distinct")
