@@ -758,9 +758,9 @@ class ObjectsConfig:
     # run alone, fps 0.40x static against 0.50x), over the 80 ms target.
     ba_all_objects: bool = False
     # With ba_all_objects: the objects that are not weak keep their poses relative to the camera and their
-    # velocities in that BA, which refines only their points (eq. 2 at those poses; no eq. 3-4 terms): the points
-    # kf_points_all_objects adds, refined over the tail's views at a fraction of the cost (with
-    # optim.objects.object_points_reduced, one Gauss-Newton step per point).
+    # velocities in that BA, which refines only their points (eq. 2 at those poses, each point on its own, outside
+    # the graph; no eq. 3-4 terms): the points kf_points_all_objects adds, refined over the tail's views at a
+    # fraction of the cost.
     ba_all_objects_points_only: bool = False
     # Output (objects.jsonl, tracks.txt, the environment's observation): a track is reported from its
     # min_output_observations-th observation on (1: from its first), as multi-object trackers confirm tracks (SORT's

@@ -13,7 +13,10 @@ factors.
 `StaticSchur.factor` puts the reduced system into a gtsam graph as one factor on the free camera
 poses (T_w_c, right perturbations), whose error is the quadratic model of the static cost: the BA
 with objects (object_ba.py, `optim.objects.static_reduced`) then optimizes cameras and objects with
-the static terms linearized once, the points following by back-substitution.
+the static terms linearized once, the points following by back-substitution. The object reprojection terms
+(eq. 2) reduce the same way to the object observations' poses Q = T_o_c (`optim.objects.object_points_reduced`:
+the observations as the "cameras", the disparity rows of eq. 2's noise model), one factor per object
+(`StaticSchur.factors`).
 """
 
 from __future__ import annotations
@@ -226,6 +229,18 @@ _UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # the entries of a s
 def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(M,) sum over the 3 residual rows of a * b, for (3, M) entries `a`, `b`."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def fixed_camera_point_steps(lin: StaticLinearization, damping: float) -> tuple[np.ndarray, np.ndarray]:
+    """(points, (P', 3) increments): each point's Gauss-Newton step -(H_pp + damping I)^-1 g_p of a linearization
+    with every camera held (the point blocks of `reduce_static`)."""
+    J, r = lin.J_t[6:], lin.r.T
+    points, obs_point = np.unique(lin.obs_pt, return_inverse=True)
+    H_pp = [np.bincount(obs_point, _rows_dot(J[i], J[j]), len(points)) for i, j in _UPPER3]
+    for i in (0, 3, 5):
+        H_pp[i] = H_pp[i] + damping
+    g_p = np.array([np.bincount(obs_point, _rows_dot(J[i], r), len(points)) for i in range(3)])
+    return points, -_cholesky3_solve(_cholesky3(np.array(H_pp)), g_p).T
 
 
 def _cholesky3(H: np.ndarray) -> np.ndarray:
