@@ -53,14 +53,18 @@ ORB-SLAM2's iteration budget (cameras: median 0.6 / 0.4 mm against 2.5 / 1.8 mm;
 2.6 / 2.2 against 4.3 / 4.6 above the converged one). End to end the two are equally accurate (config.py).
 
 With `cfg.objects.object_points_reduced` (opt-in), eq. (2) is reduced the same way to the object
-observations' poses Q (the observations as static_schur's cameras, the object points eliminated, one
-factor per object: no point is seen from two objects), relinearized at each stage's start (the objects
-move more than the cameras between the two stages), the points following by back-substitution after each
-stage. Near the optimum it reaches the exact one (tests/test_object_ba.py); on the 71 windows of traffic s0
-with every object in the BA (objects.kf_points_all_objects and ba_all_objects: ~5 objects, ~650 object
-points, ~2300 object observations per window) it takes 0.80x the CPU time of the object points as gtsam
-variables with a lower summed final cost (344149 against 344289); on the default's 45 windows (~100
-object points) it changes neither (0.98x).
+observations' poses Q (the observations as static_schur's cameras, the object points eliminated, each point
+block damped by `lambda_initial` as in the exact form's first LM step; one factor per object: no point is
+seen from two objects), relinearized at each stage's start (the objects move more than the cameras between
+the two stages), the points following by back-substitution after each stage. Near the optimum it reaches the
+exact one (tests/test_object_ba.py); on the 71 windows of traffic s0 with every object in the BA
+(objects.kf_points_all_objects and ba_all_objects: ~5 objects, ~650 object points, ~2300 object observations
+per window) it takes 0.79x the CPU time of the object points as gtsam variables at a summed final cost of
+344389 against 344289; on the default's 45 windows (~100 object points) no gain (0.98x).
+
+Pose-held objects (`ObjectBAProblem.pose_held`, objects.ba_all_objects_points_only) stay out of the graph:
+with their poses relative to the cameras held, their points are independent 3-dof problems
+(`_refine_held_points`), and their T_w_o follow the optimized cameras.
 
 Cost (this shared 2-core machine under load ~9, CPU time; windows saved by `bench_object_ba.py
 --capture` from 640x480 150-frame dynamic runs, replayed with `--compare` interleaved in one process).
