@@ -670,8 +670,9 @@ def _check(problem: ObjectBAProblem) -> None:
         raise InputError("object_bundle_adjustment: poses, points, velocities, times and measurements must be "
                          "finite, inv_sigma2 > 0")
     if problem.pose_held is not None and (
-            problem.pose_held.shape != (F,)
-            or np.any(np.bincount(problem.obj_id, problem.pose_held) % np.bincount(problem.obj_id) != 0)):
+            problem.pose_held.shape != (F,) or problem.pose_held.dtype != bool
+            or np.any(np.bincount(problem.obj_id, problem.pose_held)
+                      % np.maximum(np.bincount(problem.obj_id), 1) != 0)):
         raise InputError("object_bundle_adjustment: pose_held must be (F,) bool, all or none of each object's "
                          "observations")
     if len(np.unique(problem.timestamps)) != K:
