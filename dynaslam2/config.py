@@ -758,11 +758,6 @@ class ObjectsConfig:
     # crossing 70-84 above 0.3 m, and the BA per keyframe on traffic s0 / s1 152 / 91 ms (off 62 / 51; bench_dynamic
     # run alone, fps 0.40x static against 0.50x), over the 80 ms target.
     ba_all_objects: bool = False
-    # With ba_all_objects: the objects that are not weak keep their poses relative to the camera and their
-    # velocities in that BA, which refines only their points (eq. 2 at those poses, each point on its own, outside
-    # the graph; no eq. 3-4 terms): the points kf_points_all_objects adds, refined over the tail's views at a
-    # fraction of the cost.
-    ba_all_objects_points_only: bool = False
     # Output (objects.jsonl, tracks.txt, the environment's observation): a track is reported from its
     # min_output_observations-th observation on (1: from its first), as multi-object trackers confirm tracks (SORT's
     # min_hits, DeepSORT's n_init). Not in the paper. A track created for an object whose own track claims it again a

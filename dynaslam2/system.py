@@ -227,28 +227,24 @@ class System:
     def _local_mapping(self, frame: Frame, kf, camera_weak: bool, object_weak: list[int]) -> dict[str, float]:
         """Local mapping of a new keyframe with the BA case of III-D: camera weak only -> the static
         local BA; an object weak -> BA with objects (object-weak only: the weak objects, or with
-        `objects.ba_all_objects` every object observed at the keyframe (`ba_all_objects_points_only`: the
-        others' points only), and the cameras of the last
+        `objects.ba_all_objects` every object observed at the keyframe, and the cameras of the last
         `optim.objects.tail_seconds`; both: everything jointly, after the static local BA when
         `objects.static_ba_first`)."""
         if self.object_tracker is None:
             return self.mapper.process(kf, self.map)
         self.object_tracker.on_keyframe(frame, kf.id, self.objects, object_weak)
         ba_objects = object_weak
-        points_only: frozenset[int] = frozenset()
         if object_weak and self.config.objects.ba_all_objects:
             # (on_keyframe has just made every observation of this frame a member of the keyframe)
             ba_objects = sorted(t for t, tr in self.objects.tracks.items()
                                 if (o := tr.at_frame(frame.index)) is not None and len(o.pt_ids))
-            if self.config.objects.ba_all_objects_points_only:
-                points_only = frozenset(ba_objects) - frozenset(object_weak)
         with_objects = bool(ba_objects) and self.config.objects.ba
         static_ba = not with_objects or (camera_weak and self.config.objects.static_ba_first)
         triangulate = camera_weak or self.config.objects.object_keyframe_triangulates
         mapping_ms = self.mapper.process(kf, self.map, static_ba=static_ba, triangulate=triangulate)
         if with_objects:
             t0 = time.perf_counter()
-            object_local_ba(kf, self.map, self.objects, ba_objects, camera_weak, self.mapper, self.config, points_only)
+            object_local_ba(kf, self.map, self.objects, ba_objects, camera_weak, self.mapper, self.config)
             mapping_ms["ba"] = mapping_ms.get("ba", 0.0) + (time.perf_counter() - t0) * 1e3
         return mapping_ms
 

@@ -195,21 +195,16 @@ def test_keyframe_for_an_object_only_triangulates_no_static_points(override, exp
 
 
 
-@pytest.mark.parametrize("all_objects, points_only, expected, expected_held", [
-    (False, False, [0], set()), (True, False, [0, 1], set()), (True, True, [0, 1], {1})])
-def test_ba_with_objects_takes_the_weak_objects_or_every_object_of_the_keyframe(monkeypatch, all_objects, points_only,
-                                                                               expected, expected_held):
+@pytest.mark.parametrize("all_objects, expected", [(False, [0]), (True, [0, 1])])
+def test_ba_with_objects_takes_the_weak_objects_or_every_object_of_the_keyframe(monkeypatch, all_objects, expected):
     """III-D: a keyframe's BA with objects optimizes its weak objects; with objects.ba_all_objects every object
-    observed at the keyframe with points joins them (not one seen at another frame, nor one without points), with
-    objects.ba_all_objects_points_only those not weak for their points only. A keyframe without a weak object runs
-    none either way."""
-    system = System(load_config(None, ["mode=dynamic", f"objects.ba_all_objects={all_objects}",
-                                       f"objects.ba_all_objects_points_only={points_only}"]), kitti_like_camera())
+    observed at the keyframe with points joins them (not one seen at another frame, nor one without points). A
+    keyframe without a weak object runs none either way."""
+    system = System(load_config(None, ["mode=dynamic", f"objects.ba_all_objects={all_objects}"]), kitti_like_camera())
     system.mapper.process = lambda *args, **kwargs: {}
     system.object_tracker.on_keyframe = lambda *args: None
     calls = []
-    monkeypatch.setattr("dynaslam2.system.object_local_ba",
-                        lambda kf, map_, objects, weak, camera_weak, mapper, config, held: calls.append((weak, held)))
+    monkeypatch.setattr("dynaslam2.system.object_local_ba", lambda kf, map_, objects, weak, *args: calls.append(weak))
     for pt_ids, kf_id, frame_index in (([5, 6], 7, 3), ([8], 7, 3), ([9], 2, 1), ([], 7, 3)):
         track = system.objects.new_track("car")
         track.observations.append(ObjectObservation(
@@ -217,7 +212,7 @@ def test_ba_with_objects_takes_the_weak_objects_or_every_object_of_the_keyframe(
             np.array(pt_ids, dtype=np.int64), kf_id=kf_id))
     for weak in ([0], []):
         system._local_mapping(types.SimpleNamespace(index=3), types.SimpleNamespace(id=7), False, weak)
-    assert calls == [(expected, expected_held)]
+    assert calls == [expected]
 
 
 def test_camera_keyframe_decision_ignores_object_only_keyframes():

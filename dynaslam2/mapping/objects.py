@@ -81,11 +81,9 @@ def write_back(track: ObjectTrack, o: ObjectObservation, T_w_o: np.ndarray, v_o:
 
 
 def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int], camera_weak: bool,
-                    mapper, config: SlamConfig, points_only: frozenset[int] = frozenset()) -> dict[str, int]:
-    """BA with objects for keyframe `kf` (module docstring) over the tracks `weak`; returns the parameter counts of
-    the window (empty when there was nothing to optimize). `mapper`: the `LocalMapper` (camera, pyramid sigmas).
-    `points_only`: tracks (of `weak`) whose poses relative to the camera and velocities are held, their points
-    refined."""
+                    mapper, config: SlamConfig) -> dict[str, int]:
+    """BA with objects for keyframe `kf` (module docstring); returns the parameter counts of the window
+    (empty when there was nothing to optimize). `mapper`: the `LocalMapper` (camera, pyramid sigmas)."""
     tail = config.optim.objects.tail_seconds
     tracks = [objects.tracks[t] for t in weak]
     if camera_weak:
@@ -150,7 +148,6 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         X_o=P.X_o[obj_pts].copy(), pt_obj=track_of_point,
         oobs_f=oobs_f, oobs_pt=oobs_pt, oobs_meas=oobs_meas, oobs_inv_sigma2=oobs_inv_sigma2,
         optimize_static=camera_weak, optimize_objects=True,
-        pose_held=np.array([weak[k] in points_only for k, _ in obs_list]) if points_only else None,
     )
     result = object_bundle_adjustment(problem, mapper.camera, config.optim)
     if not all(np.all(np.isfinite(a)) for a in (result.T_c_w, result.X_w, result.T_w_o, result.X_o)):

@@ -62,10 +62,6 @@ exact one (tests/test_object_ba.py); on the 71 windows of traffic s0 with every 
 per window) it takes 0.79x the CPU time of the object points as gtsam variables at a summed final cost of
 344389 against 344289; on the default's 45 windows (~100 object points) no gain (0.98x).
 
-Pose-held objects (`ObjectBAProblem.pose_held`, objects.ba_all_objects_points_only) stay out of the graph:
-with their poses relative to the cameras held, their points are independent 3-dof problems
-(`_refine_held_points`), and their T_w_o follow the optimized cameras.
-
 Cost (this shared 2-core machine under load ~9, CPU time; windows saved by `bench_object_ba.py
 --capture` from 640x480 150-frame dynamic runs, replayed with `--compare` interleaved in one process).
 Joint windows (up to 30 keyframes, ~4000 static points, ~20k static and 20-600 object observations),
@@ -122,7 +118,7 @@ from dynaslam2.optim.object_factors import (
 )
 from dynaslam2.optim.pose_only import pose_only_factor
 from dynaslam2.optim.reprojection import chi2_depth, chi2_thresholds, huber_cost, is_stereo
-from dynaslam2.optim.static_schur import StaticSchur, fixed_camera_point_steps, linearize_static, static_schur
+from dynaslam2.optim.static_schur import StaticSchur, static_schur
 
 
 @dataclass
@@ -149,9 +145,6 @@ class ObjectBAProblem(BAProblem):
     oobs_inv_sigma2: np.ndarray  # (M2,)
     optimize_static: bool = True  # static points are variables (else constants constraining the cameras)
     optimize_objects: bool = True  # object poses, velocities and points are variables (else untouched)
-    # (F,) bool or None (all or none of an object's observations): objects whose poses relative to the cameras
-    # (T_c_o) and velocities are held, outside the graph; only their points are refined, from their eq. (2) terms
-    pose_held: np.ndarray | None = None
 
 
 @dataclass
@@ -223,15 +216,9 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
     th_o = chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo)
     use = np.ones(len(problem.obs_kf), dtype=bool)
     use_o = np.full(len(problem.oobs_f), problem.optimize_objects)
-    pose_held = np.zeros(len(problem.obj_frames), dtype=bool) if problem.pose_held is None else problem.pose_held
-    T_c_o_held = problem.T_c_w[problem.obj_frames[pose_held]] @ problem.T_w_o[pose_held]
-
-    def hold_poses() -> None:  # the pose-held observations keep their poses relative to the (moved) cameras
-        est.T_w_o[pose_held] = inverse(est.T_c_w[problem.obj_frames[pose_held]]) @ T_c_o_held
-
-    structure, held_terms = _split_structure(problem, use_o, pose_held, cfg.objects.min_observation_points)
+    structure = _object_structure(problem, use_o, cfg.objects.min_observation_points)
     c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
-    initial_error = _total_cost(problem, est, structure, held_terms, camera, cfg, c2)
+    initial_error = _total_cost(problem, est, structure, camera, cfg, c2)
     schur = None
     if problem.optimize_static and cfg.objects.static_reduced:
         schur, use = _static_reduction(problem, est, fixed, th, depth, camera, cfg)
@@ -249,11 +236,9 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
             if problem.optimize_objects:
                 c2_o, depth_o = _object_chi2_depth(problem, est, camera, cfg)
                 use_o = (c2_o <= th_o) & (depth_o > cfg.min_depth)
-            structure, held_terms = _split_structure(problem, use_o, pose_held, cfg.objects.min_observation_points)
+            structure = _object_structure(problem, use_o, cfg.objects.min_observation_points)
         if n_iter == 0:
             continue
-        if held_terms.any():
-            _refine_held_points(problem, est, held_terms, th_o if robust else None, n_iter, camera, cfg)
         t_build = time.perf_counter()
         held = _held_observations(problem, structure, fixed)
         object_schur = (_object_reduction(problem, est, structure, held, th_o if robust else None, camera, cfg)
@@ -272,7 +257,6 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
         timings_ms["solve"] += 1e3 * (time.perf_counter() - t_solve)
         iterations += optimizer.iterations()
         _read_back(values, keys, problem, cfg, est)
-        hold_poses()
         if object_schur is not None:  # the object points by back-substitution from this stage's start
             object_reduced, Q0 = object_schur
             Q = inverse(est.T_c_w[problem.obj_frames[object_reduced.cams]] @ est.T_w_o[object_reduced.cams])
@@ -282,15 +266,13 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
         est.X_w[schur.points] = X_w0[schur.points] + schur.point_steps(
             _local_coordinates(T_w_c0, inverse(est.T_c_w[schur.cams])))
     est.T_c_w[fixed] = problem.T_c_w[fixed]
-    hold_poses()
     c2, depth = static_chi2_depth(problem, est.T_c_w, est.X_w, camera)
     c2_o, depth_o = _object_chi2_depth(problem, est, camera, cfg)
     return ObjectBAResult(
         T_c_w=est.T_c_w, X_w=est.X_w, inlier=(c2 <= th) & (depth > cfg.min_depth),
         T_w_o=est.T_w_o, v_o=est.velocity[:, :3].copy(), w_o=est.velocity[:, 3:].copy(), X_o=est.X_o,
         obj_inlier=(c2_o <= th_o) & (depth_o > cfg.min_depth), iterations=iterations,
-        initial_error=initial_error, final_error=_total_cost(problem, est, structure, held_terms, camera, cfg, c2,
-                                                                        c2_o),
+        initial_error=initial_error, final_error=_total_cost(problem, est, structure, camera, cfg, c2, c2_o),
         timings_ms=timings_ms, n_parameters=n_parameters)
 
 
@@ -340,51 +322,6 @@ def _object_structure(problem: ObjectBAProblem, use_o: np.ndarray, min_points: i
     moving = np.zeros(F, dtype=bool)
     moving[pair_a] = moving[pair_b] = True
     return _ObjectStructure(obs, points, use, pair_a, pair_b, pair_dt, moving)
-
-
-def _split_structure(problem: ObjectBAProblem, use_o: np.ndarray, pose_held: np.ndarray,
-                     min_points: int) -> tuple[_ObjectStructure, np.ndarray]:
-    """The structure of the objects whose poses are variables (`_object_structure` of the terms `use_o` not in
-    a pose-held observation) and the (M2,) bool terms that refine the pose-held objects' points: used, of
-    points determined by them (one stereo or two observations)."""
-    on_held = pose_held[problem.oobs_f]
-    structure = _object_structure(problem, use_o & ~on_held, min_points)
-    held_terms = use_o & on_held
-    if held_terms.any():
-        n_obs = np.bincount(problem.oobs_pt[held_terms], minlength=len(problem.X_o))
-        n_stereo = np.bincount(problem.oobs_pt[held_terms & is_stereo(problem.oobs_meas)], minlength=len(problem.X_o))
-        held_terms &= ((n_obs >= 2) | (n_stereo >= 1))[problem.oobs_pt]
-    return structure, held_terms
-
-
-def _refine_held_points(problem: ObjectBAProblem, est: _Estimate, terms: np.ndarray, delta2: np.ndarray | None,
-                        n_iter: int, camera: StereoCamera, cfg: OptimConfig) -> None:
-    """The points of the pose-held objects (`problem.pose_held`) from their eq. (2) `terms` at their held poses
-    relative to the cameras: independent 3-dof problems, damped Gauss-Newton on all of them at once
-    (static_schur's linearization and point blocks, each damped by the exact form's initial LM lambda
-    `cfg.objects.lambda_initial`, as in `_object_reduction`: a point seen without depth from nearly one
-    direction would slide along its ray), Huber weights (`delta2`: (M2,), None: no kernel) relinearized each
-    iteration; at most `n_iter` steps, stopping as LM does on a relative cost decrease below
-    `cfg.ba_relative_error_tol` and on a step that raises the cost (undone)."""
-    T_c_o = problem.T_c_w[problem.obj_frames] @ problem.T_w_o  # (only the pose-held rows are read)
-    args = (problem.oobs_f[terms], problem.oobs_pt[terms], problem.oobs_meas[terms], problem.oobs_inv_sigma2[terms],
-            camera, cfg.min_depth, None if delta2 is None else delta2[terms])
-
-    def linearize():
-        return linearize_static(T_c_o, est.X_o, *args, _disparity_weight(cfg))
-
-    lin = linearize()
-    for _ in range(n_iter):
-        points, steps = fixed_camera_point_steps(lin, cfg.objects.lambda_initial)
-        before = est.X_o[points].copy()
-        est.X_o[points] += steps
-        new = linearize()
-        if new.cost > lin.cost:
-            est.X_o[points] = before
-            return
-        decrease, lin = lin.cost - new.cost, new
-        if decrease <= cfg.ba_relative_error_tol * (lin.cost + decrease):
-            return
 
 
 def _held_observations(problem: ObjectBAProblem, st: _ObjectStructure, fixed: np.ndarray) -> np.ndarray:
@@ -609,18 +546,17 @@ def _object_chi2_depth(problem: ObjectBAProblem, est: _Estimate, camera: StereoC
                       camera, _disparity_weight(cfg))
 
 
-def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, held_terms: np.ndarray,
-                camera: StereoCamera, cfg: OptimConfig, c2: np.ndarray, c2_o: np.ndarray | None = None) -> float:
-    """Summed Huber cost of eq. (6) at `est`: reprojection (chi2 thresholds as deltas; the object terms of `st`
-    and `held_terms`), eq. (3), eq. (4). `c2` / `c2_o`: chi2 of the static / object-point observations at `est`
-    (None: computed here)."""
+def _total_cost(problem: ObjectBAProblem, est: _Estimate, st: _ObjectStructure, camera: StereoCamera,
+                cfg: OptimConfig, c2: np.ndarray, c2_o: np.ndarray | None = None) -> float:
+    """Summed Huber cost of eq. (6) at `est`: reprojection (chi2 thresholds as deltas), eq. (3), eq. (4).
+    `c2` / `c2_o`: chi2 of the static / object-point observations at `est` (None: computed here)."""
     ocfg = cfg.objects
     cost = huber_cost(c2, chi2_thresholds(problem.meas, cfg.chi2_mono, cfg.chi2_stereo)).sum()
     if not problem.optimize_objects:
         return float(cost)
     if c2_o is None:
         c2_o, _ = _object_chi2_depth(problem, est, camera, cfg)
-    cost += huber_cost(c2_o, chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo))[st.use | held_terms].sum()
+    cost += huber_cost(c2_o, chi2_thresholds(problem.oobs_meas, cfg.chi2_mono, cfg.chi2_stereo))[st.use].sum()
     a, b, dt = st.pair_a, st.pair_b, st.pair_dt
     r = (est.velocity[b] - est.velocity[a]) / np.repeat([ocfg.sigma_linear_acc * dt, ocfg.sigma_angular_acc * dt], 3,
                                                         axis=0).T
@@ -669,11 +605,5 @@ def _check(problem: ObjectBAProblem) -> None:
             and np.all(problem.oobs_inv_sigma2 > 0)):
         raise InputError("object_bundle_adjustment: poses, points, velocities, times and measurements must be "
                          "finite, inv_sigma2 > 0")
-    if problem.pose_held is not None and (
-            problem.pose_held.shape != (F,) or problem.pose_held.dtype != bool
-            or np.any(np.bincount(problem.obj_id, problem.pose_held)
-                      % np.maximum(np.bincount(problem.obj_id), 1) != 0)):
-        raise InputError("object_bundle_adjustment: pose_held must be (F,) bool, all or none of each object's "
-                         "observations")
     if len(np.unique(problem.timestamps)) != K:
         raise InputError("object_bundle_adjustment: the keyframe timestamps must be distinct")

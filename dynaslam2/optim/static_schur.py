@@ -231,18 +231,6 @@ def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def fixed_camera_point_steps(lin: StaticLinearization, damping: float) -> tuple[np.ndarray, np.ndarray]:
-    """(points, (P', 3) increments): each point's Gauss-Newton step -(H_pp + damping I)^-1 g_p of a linearization
-    with every camera held (the point blocks of `reduce_static`)."""
-    J, r = lin.J_t[6:], lin.r.T
-    points, obs_point = np.unique(lin.obs_pt, return_inverse=True)
-    H_pp = [np.bincount(obs_point, _rows_dot(J[i], J[j]), len(points)) for i, j in _UPPER3]
-    for i in (0, 3, 5):
-        H_pp[i] = H_pp[i] + damping
-    g_p = np.array([np.bincount(obs_point, _rows_dot(J[i], r), len(points)) for i in range(3)])
-    return points, -_cholesky3_solve(_cholesky3(np.array(H_pp)), g_p).T
-
-
 def _cholesky3(H: np.ndarray) -> np.ndarray:
     """Lower Cholesky factors L (L L^T = H) of symmetric 3x3 blocks given by their `_UPPER3` entries (6, P),
     as (l00, l10, l20, l11, l21, l22) (6, P); np.linalg.LinAlgError when one is not positive definite."""
