@@ -289,7 +289,9 @@ class ObjectOptimConfig:
     # with objects.kf_points_all_objects and ba_all_objects (crossing 70-84 / 55-69, 150 fr 640x480), object ATE
     # 0.285 / 0.251 m against the exact form's 0.309 / 0.235, TP 75.2 / 74.9 % against 75.4 / 75.1, ego 0.0147 /
     # 0.0146 against 0.0151 / 0.0154 m; one id switch on an unoccluded track (s77 gt22) against none. (With the
-    # points damped by 1e-4 instead, the BA moved them far more: 0.380 / 0.400 m.)
+    # points damped by 1e-4 instead, the BA moved them far more: 0.380 / 0.400 m.) bench_dynamic.py with the three
+    # options, run alone (854ce31): BA per keyframe on traffic s0 / s1 142 / 93 ms against static's 60 / 54 (2.37x /
+    # 1.72x; without this option 2.81x / 1.98x at 1e7b07a), fps 0.42x static.
     object_points_reduced: bool = False
     tail_seconds: float = 2.0  # object-weak BA (III-D): keyframes within this time of the newest are free
 
