@@ -3,7 +3,6 @@ and elimination of the same factors."""
 
 from __future__ import annotations
 
-
 import gtsam
 import numpy as np
 import pytest
@@ -19,11 +18,13 @@ from dynaslam2.optim.synthetic_objects import make_object_window
 CAMERA = kitti_like_camera()
 
 
+@pytest.mark.parametrize("disparity_weight", [None, 3.0])
 @pytest.mark.parametrize("robust", [False, True])
-def test_reduced_system_and_back_substitution_are_gtsams(robust):
+def test_reduced_system_and_back_substitution_are_gtsams(robust, disparity_weight):
     """Perturbed window with outliers and monocular observations, no damping: S and s equal the Hessian
     and gradient on the free cameras left by gtsam's elimination of the points (GenericStereoFactor3D /
-    projection factors, Huber as gtsam's Robust model), and the point steps its back-substitution."""
+    projection factors, Huber as gtsam's Robust model; with `disparity_weight` the stereo noise of the object
+    terms, eq. 2), and the point steps its back-substitution."""
     cfg = OptimConfig()
     p = make_object_window(np.random.default_rng(3), CAMERA, n_keyframes=6, n_static=300,
                            outlier_fraction=0.05).problem
@@ -36,7 +37,8 @@ def test_reduced_system_and_back_substitution_are_gtsams(robust):
     obs_kf, obs_pt, meas, inv_sigma2 = p.obs_kf[use], p.obs_pt[use], meas[use], p.inv_sigma2[use]
     delta2 = chi2_thresholds(meas, cfg.chi2_mono, cfg.chi2_stereo) if robust else None
     free = ~p.fixed
-    schur = static_schur(p.T_c_w, free, p.X_w, obs_kf, obs_pt, meas, inv_sigma2, CAMERA, cfg.min_depth, delta2, 0.0)
+    schur = static_schur(p.T_c_w, free, p.X_w, obs_kf, obs_pt, meas, inv_sigma2, CAMERA, cfg.min_depth, delta2, 0.0,
+                         disparity_weight)
 
     K = len(p.T_c_w)
     point_key = K + schur.points
@@ -47,7 +49,8 @@ def test_reduced_system_and_back_substitution_are_gtsams(robust):
     key_of_point = np.full(len(p.X_w), -1)
     key_of_point[schur.points] = point_key
     deltas = (np.sqrt(cfg.chi2_mono), np.sqrt(cfg.chi2_stereo)) if robust else (None, None)
-    add_stereo_factors(graph, obs_kf, key_of_point[obs_pt], meas, inv_sigma2, CAMERA, *deltas)
+    add_stereo_factors(graph, obs_kf, key_of_point[obs_pt], meas, inv_sigma2, CAMERA, *deltas,
+                       disparity_weight=disparity_weight)
     bayes_net, rest = graph.linearize(values).eliminatePartialSequential(gtsam.Ordering(point_key.tolist()))
     cams = np.flatnonzero(free)
     H, eta = rest.hessian(gtsam.Ordering(cams.tolist() + np.flatnonzero(~free).tolist()))
@@ -108,3 +111,22 @@ def test_factor_square_root():
         assert np.abs(A.T @ A - S_k).max() < 1e-9 * np.abs(S_k).max()
         assert np.abs(A.T @ b + s_k).max() < 1e-6 * np.abs(s_k).max()
         assert (len(b) == len(s_k)) == full
+
+
+def test_factors_by_group_are_the_one_factor_model():
+    """StaticSchur.factors on groups of cameras that see no point in common (S zero between them, as the objects
+    of eq. 2): the summed errors are the one factor's quadratic model at any poses."""
+    p = make_object_window(np.random.default_rng(9), CAMERA, n_keyframes=6, n_static=200).problem
+    schur = static_schur(p.T_c_w, ~p.fixed, p.X_w, p.obs_kf, p.obs_pt, p.meas, p.inv_sigma2, CAMERA, 1e-3, None, 1e-4)
+    groups = np.arange(len(schur.cams)) % 2
+    between = groups[:, None] != groups[None, :]
+    schur.S = schur.S * ~np.kron(between, np.ones((6, 6), dtype=bool))  # (the blocks of cameras of two groups)
+    keys = np.arange(len(schur.cams))
+    T_w_c = inverse(p.T_c_w[schur.cams])
+    values = gtsam.Values()
+    rng = np.random.default_rng(10)
+    insert_poses(values, keys, np.array([T @ gtsam.Pose3.Expmap(rng.normal(0.0, 1e-3, 6)).matrix() for T in T_w_c]))
+    split = schur.factors(keys, T_w_c, groups)
+    assert len(split) == 2
+    whole = schur.factor(keys, T_w_c).error(values)
+    assert abs(sum(f.error(values) for f in split) - whole) < 1e-9 * whole
