@@ -247,7 +247,9 @@ class ObjectOptimConfig:
     # (5 + 10); 1e-4 with 1 + 0 iterations 0.34x the CPU and ~16x closer there, but on synthetic windows
     # (tests/test_object_ba.py) 1 + 0 ends farther than 5 + 10 from lambda 1: kept at ORB-SLAM2's settings
     lambda_initial: float = 1.0
-    min_observation_points: int = 5  # an object observation with fewer used point observations keeps its pose
+    # An object observation with fewer used point observations has no reprojection term (eq. 2): its pose follows its
+    # neighbours in time through eq. (3)-(5) (object_ba._object_structure).
+    min_observation_points: int = 5
     # eq. (2)'s stereo residuals as [u, v, disparity], the disparity at sigma / disparity_weight (the object
     # pose-only optimization's model, objects.pose_disparity_weight); 0: ORB-SLAM2's isotropic [u, v, u_right]
     # (a disparity sigma of ~1.4 px at level 0 where the sub-pixel SAD gives ~0.1 px), with which the BA's
