@@ -147,6 +147,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         timestamps=np.array([map_.keyframes[k].timestamp for k in all_ids]),
         X_o=P.X_o[obj_pts].copy(), pt_obj=track_of_point,
         oobs_f=oobs_f, oobs_pt=oobs_pt, oobs_meas=oobs_meas, oobs_inv_sigma2=oobs_inv_sigma2,
+        obj_measured=np.array([o.measured for _, o in obs_list]),
         optimize_static=camera_weak, optimize_objects=True,
     )
     result = object_bundle_adjustment(problem, mapper.camera, config.optim)

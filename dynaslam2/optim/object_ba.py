@@ -27,7 +27,8 @@ Gauge: the world by the fixed keyframes (the first keyframe when none is fixed a
 is optimized); each object frame by holding (strong prior) its observations at fixed keyframes, or,
 when it has none, its earliest observation in the window: in "camera_in_object" the held variable
 is Q (the object pose relative to that camera), in "direct" T_w_o; the two gauges coincide when the
-anchoring keyframe is fixed.
+anchoring keyframe is fixed. A measured observation whose reprojection terms are nearly all of points seen
+only there in the window is held too (`optim.objects.hold_single_view_observations`, `_held_observations`).
 
 The three cases of III-D: `optimize_static and not optimize_objects` (camera weak only) is the static
 local BA (`local_bundle_adjustment`, objects untouched); `optimize_objects and not optimize_static`
@@ -143,6 +144,7 @@ class ObjectBAProblem(BAProblem):
     oobs_pt: np.ndarray  # (M2,) index into X_o
     oobs_meas: np.ndarray  # (M2, 3)
     oobs_inv_sigma2: np.ndarray  # (M2,)
+    obj_measured: np.ndarray | None = None  # (F,) bool: the tracker measured the pose (not its prediction); None: all
     optimize_static: bool = True  # static points are variables (else constants constraining the cameras)
     optimize_objects: bool = True  # object poses, velocities and points are variables (else untouched)
 
@@ -240,7 +242,7 @@ def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg
         if n_iter == 0:
             continue
         t_build = time.perf_counter()
-        held = _held_observations(problem, structure, fixed)
+        held = _held_observations(problem, structure, fixed, cfg)
         object_schur = (_object_reduction(problem, est, structure, held, th_o if robust else None, camera, cfg)
                         if cfg.objects.object_points_reduced else None)
         graph, values, keys, ordering = _build(problem, est, fixed, use, structure, held, robust, camera, cfg,
@@ -324,14 +326,28 @@ def _object_structure(problem: ObjectBAProblem, use_o: np.ndarray, min_points: i
     return _ObjectStructure(obs, points, use, pair_a, pair_b, pair_dt, moving)
 
 
-def _held_observations(problem: ObjectBAProblem, st: _ObjectStructure, fixed: np.ndarray) -> np.ndarray:
-    """(F,) bool: the object observations whose pose is held (strong prior), the gauge of each object frame:
-    its observations at fixed keyframes, or when it has none, its earliest one in the window."""
+def _held_observations(problem: ObjectBAProblem, st: _ObjectStructure, fixed: np.ndarray,
+                       cfg: OptimConfig) -> np.ndarray:
+    """(F,) bool: the object observations whose pose is held (strong prior): the gauge of each object frame
+    (its observations at fixed keyframes, or when it has none, its earliest one in the window) and, with
+    `cfg.objects.hold_single_view_observations`, each measured observation (`obj_measured`) with reprojection terms
+    of which fewer than `min_observation_points` are of points seen at another observation of the window. Its pose
+    is the tracker's, measured on points whose other observations are outside the window (non-keyframes); eq. (2)
+    cannot move it (its single-view points follow it), and eq. (3)-(4) alone would bend it to the window's
+    motion: a car turning out of an occlusion straightened 6 -> 18 deg of rotation error, its points carried
+    along (crossing s99, f33)."""
     held = st.obs & fixed[problem.obj_frames]
     for k in np.unique(problem.obj_id[st.obs & ~held]).tolist():
         mine = np.flatnonzero(st.obs & (problem.obj_id == k))
         if not held[mine].any():
             held[mine[np.argmin(problem.timestamps[problem.obj_frames[mine]])]] = True
+    if cfg.objects.hold_single_view_observations:
+        F, min_points = len(problem.obj_frames), cfg.objects.min_observation_points
+        n_views = np.bincount(problem.oobs_pt[st.use], minlength=len(problem.X_o))
+        multi_view = st.use & (n_views[problem.oobs_pt] >= 2)
+        measured = np.ones(F, dtype=bool) if problem.obj_measured is None else problem.obj_measured
+        held |= (st.obs & measured & (np.bincount(problem.oobs_f[st.use], minlength=F) >= min_points)
+                 & (np.bincount(problem.oobs_f[multi_view], minlength=F) < min_points))
     return held
 
 
@@ -582,12 +598,13 @@ def _check(problem: ObjectBAProblem) -> None:
         problem.obj_id.shape == (F,) and problem.T_w_o.shape == (F, 4, 4) and problem.v_o.shape == (F, 3)
         and problem.w_o.shape == (F, 3) and problem.timestamps.shape == (K,) and problem.X_o.shape == (P2, 3)
         and problem.pt_obj.shape == (P2,) and problem.oobs_pt.shape == (M2,) and problem.oobs_meas.shape == (M2, 3)
-        and problem.oobs_inv_sigma2.shape == (M2,))
+        and problem.oobs_inv_sigma2.shape == (M2,)
+        and (problem.obj_measured is None or np.shape(problem.obj_measured) == (F,)))
     if not shapes_ok:
         raise InputError("object_bundle_adjustment: expected T_c_w (K,4,4), fixed (K,), timestamps (K,), X_w (P,3), "
                          "obs_kf/obs_pt (M,), meas (M,3), inv_sigma2 (M,), obj_frames/obj_id (F,), T_w_o (F,4,4), "
                          "v_o/w_o (F,3), X_o (P2,3), pt_obj (P2,), oobs_f/oobs_pt (M2,), oobs_meas (M2,3), "
-                         "oobs_inv_sigma2 (M2,) with K >= 1")
+                         "oobs_inv_sigma2 (M2,), obj_measured (F,) or None, with K >= 1")
     P = len(problem.X_w)
     for name, idx, n in (("obs_kf", problem.obs_kf, K), ("obs_pt", problem.obs_pt, P),
                          ("obj_frames", problem.obj_frames, K), ("oobs_f", problem.oobs_f, F),
