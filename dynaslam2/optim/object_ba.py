@@ -345,7 +345,7 @@ def _held_observations(problem: ObjectBAProblem, st: _ObjectStructure, fixed: np
         F, min_points = len(problem.obj_frames), cfg.objects.min_observation_points
         n_views = np.bincount(problem.oobs_pt[st.use], minlength=len(problem.X_o))
         multi_view = st.use & (n_views[problem.oobs_pt] >= 2)
-        measured = np.ones(F, dtype=bool) if problem.obj_measured is None else problem.obj_measured
+        measured = np.ones(F, dtype=bool) if problem.obj_measured is None else problem.obj_measured.astype(bool)
         held |= (st.obs & measured & (np.bincount(problem.oobs_f[st.use], minlength=F) >= min_points)
                  & (np.bincount(problem.oobs_f[multi_view], minlength=F) < min_points))
     return held
