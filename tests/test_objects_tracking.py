@@ -263,6 +263,36 @@ def test_rotation_filter_smooths_pose_only_rotation_noise():
     assert rates[True] < 0.2 * rates[False], rates
 
 
+@pytest.mark.parametrize("classes", ["pedestrian", ""])
+def test_a_pedestrians_rotation_is_not_measured(classes):
+    """A pedestrian-sized body (10 points, 0.5 x 1.7 x 0.3 m) 18 m away walking straight, seen with 0.7 px of
+    keypoint noise, five draws: with objects.translation_only_classes its rotation stays the prediction (no
+    turn: identity), without its pose-only rotations reach 10-20 deg; its origin's RMS position error is lower
+    (0.23 against 0.28 m here)."""
+    max_rot, rms = [], []
+    for seed in range(21, 26):
+        rng = np.random.default_rng(seed)
+        body = Body(rng, 2001, 10, (0.5, 1.7, 0.3))
+        objects, trk = ObjectMap(), tracker(f"objects.translation_only_classes=[{classes}]")
+        T_w_b = [make_pose(np.eye(3), np.array([-2.0 + 0.14 * i, 0.0, 18.0])) for i in range(25)]
+        rot, pos = [], []
+        for i, T in enumerate(T_w_b):
+            frame = make_frame(i, [(body, T)])
+            (e,) = trk.track(noisy(frame, rng, 0.7) if i else frame, None, objects).estimates
+            T_b_o = inverse(T_w_b[0]) @ objects.tracks[e.track_id].observations[0].T_w_o  # created from exact frame 0
+            if i >= 5:
+                rot.append(np.degrees(np.linalg.norm(so3_log(e.T_w_o[:3, :3]))))
+                pos.append(np.linalg.norm(e.T_w_o[:3, 3] - (T @ T_b_o)[:3, 3]))
+        max_rot.append(max(rot))
+        rms.append(np.sqrt(np.mean(np.square(pos))))
+    if classes:
+        assert max(max_rot) < 1e-6, max_rot
+        assert np.mean(rms) < 0.25, rms
+    else:
+        assert min(max_rot) > 5.0, max_rot
+        assert np.mean(rms) > 0.25, rms
+
+
 def test_pose_information_matches_numerical_jacobians():
     """The pose-only precision used by the filters: the translation information and the rotation covariance
     (translation marginalized) equal those from finite differences of the stereo projection under a world
@@ -454,7 +484,8 @@ def test_object_creation_thresholds():
 @pytest.mark.parametrize("key,value", [("min_inliers", 2), ("join_ratio", 1.5), ("max_lost_s", 0),
                                        ("box_velocity_window_s", -0.1), ("join_contain", 1.5),
                                        ("register_chi2", 0), ("appearance_max_distance", 1.5),
-                                       ("appearance_bins", 0), ("appearance_bins", 17), ("appearance_gallery", 0)])
+                                       ("appearance_bins", 0), ("appearance_bins", 17), ("appearance_gallery", 0),
+                                       ("translation_only_classes", "[bike]")])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 

@@ -41,7 +41,7 @@ from dynaslam2.config import SlamConfig
 from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_log, transform
+from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_exp, so3_log, transform
 from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
@@ -484,7 +484,8 @@ class ObjectTracker:
         (inverse of eq. 5) when the two are close in time, and refresh the matched points.
         `measured=False`: `T_w_o` is a prediction (velocities carried over). `position_info`: (3, 3)
         information of a measured position whose rotation is the prediction (a box join's registration),
-        used by the filter instead of the pose-only information."""
+        used by the filter instead of the pose-only information. With the filter, a pose-only pose of a class in
+        translation_only_classes keeps the predicted rotation (`_predicted_rotation`)."""
         last = track.observations[-1] if track.observations else None
         v_o, w_o = np.zeros(3), np.zeros(3)
         known = False
@@ -504,6 +505,9 @@ class ObjectTracker:
                 info, rot_cov = self._pose_information(frame, objects, T_w_o, kp, pts)
             dt = frame.timestamp - last.timestamp if last is not None else 0.0
             T_w_o = T_w_o.copy()
+            if rot_cov is not None and last is not None and track.cls in self.cfg.translation_only_classes:
+                T_w_o = self._predicted_rotation(objects, track, T_w_o, pts, dt)
+                rot_cov, w_o = None, last.w_o.copy()
             if self.cfg.rotation_filter:
                 T_w_o[:3, :3], w_o = filter_rotation(track, dt, T_w_o[:3, :3], rot_cov, self.cfg)
             p_w, v_w = filter_position(track, dt, T_w_o[:3, 3], info, self.cfg)
@@ -518,6 +522,17 @@ class ObjectTracker:
         P = objects.points
         P.desc[pts] = frame.keypoints.desc[kp]
         P.n_found[pts] += 1
+
+    def _predicted_rotation(self, objects: ObjectMap, track: ObjectTrack, T_w_o: np.ndarray, pts: np.ndarray,
+                            dt: float) -> np.ndarray:
+        """Pose-only pose `T_w_o` of points `pts` with the track's predicted rotation (the last one turned at its
+        capped w_o over `dt`) in place of the measured one, moved so that the points' centroid stays where the
+        pose-only put it (objects.translation_only_classes)."""
+        R_pred = track.last.T_w_o[:3, :3] @ so3_exp(capped_angular_velocity(track.last.w_o, self.cfg) * dt)
+        T = T_w_o.copy()
+        T[:3, 3] += (T_w_o[:3, :3] - R_pred) @ objects.points.X_o[pts].mean(axis=0)
+        T[:3, :3] = R_pred
+        return T
 
     def _pose_information(self, frame: Frame, objects: ObjectMap, T_w_o: np.ndarray, kp: np.ndarray,
                           pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
