@@ -919,7 +919,7 @@ class ObjectsConfig:
     vehicle_turn: bool = True
     # Not in the paper, with `filter`: the classes whose rotation the tracker does not measure. A pose-only pose of
     # such an object keeps the predicted rotation (the last one turned at its capped w_o) and is moved so that its
-    # inliers' centroid stays where the pose-only put it; the rotation filter takes the prediction (the BA still
+    # points' centroid stays where the pose-only put it; the rotation filter takes the prediction (the BA still
     # refines the poses, eq. 2-5). A pedestrian is a thin body that 6-10 keypoints see from 15-30 m: its pose-only
     # rotation is noise, which the rotation filter can turn into a spin that moves the object-frame origin by metres
     # (people begun at 30-33 m from their mask's depth: crossing s42 gt22, 7 m away with 36 points, 38 -> 175 deg off
