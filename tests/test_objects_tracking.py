@@ -250,7 +250,8 @@ def test_rotation_filter_smooths_pose_only_rotation_noise():
         rng = np.random.default_rng(6)
         body = Body(rng, 2001, 25, (0.6, 1.7, 0.4))
         objects = ObjectMap()
-        trk = tracker(f"objects.rotation_filter={str(on).lower()}", "objects.fuse_points=false")
+        trk = tracker(f"objects.rotation_filter={str(on).lower()}", "objects.fuse_points=false",
+                      "objects.translation_only_classes=[]")
         err, rate = [], []
         for i in range(30):
             frame = make_frame(i, [(body, make_pose(np.eye(3), np.array([-3.0 + 0.15 * i, 0.0, 12.0])))])
