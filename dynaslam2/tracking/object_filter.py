@@ -76,6 +76,13 @@ def filter_position(track: ObjectTrack, dt: float, p_meas: np.ndarray, info: np.
     return m[:3].copy(), m[3:].copy()
 
 
+def predicted_rotation(track: ObjectTrack, dt: float, cfg: ObjectsConfig) -> np.ndarray:
+    """The rotation filter's prediction `dt` after the track's last observation: its rotation turned at its capped
+    w_o."""
+    last = track.last
+    return last.T_w_o[:3, :3] @ so3_exp(capped_angular_velocity(last.w_o, cfg) * dt)
+
+
 def filter_rotation(track: ObjectTrack, dt: float, R_meas: np.ndarray, rot_cov: np.ndarray | None,
                     cfg: ObjectsConfig) -> tuple[np.ndarray, np.ndarray]:
     """Constant-angular-velocity filter of the object rotation (error state d: R = R_mean Exp(d), object frame;
@@ -99,7 +106,7 @@ def filter_rotation(track: ObjectTrack, dt: float, R_meas: np.ndarray, rot_cov: 
     if R_noise is None:
         track.rot_cov = 0.5 * (P + P.T)
         return R_meas, last.w_o.copy()
-    R = last.T_w_o[:3, :3] @ so3_exp(w * dt)
+    R = predicted_rotation(track, dt, cfg)
     K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R_noise)
     d = K @ so3_log(R.T @ R_meas)
     P = P - K @ P[:3, :]

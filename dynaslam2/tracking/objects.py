@@ -41,7 +41,7 @@ from dynaslam2.config import SlamConfig
 from dynaslam2.eval.objects import box_iou
 from dynaslam2.features.matcher import match_descriptors, search_by_projection
 from dynaslam2.geometry.camera import StereoCamera
-from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_exp, so3_log, transform
+from dynaslam2.geometry.se3 import hat, inverse, make_pose, so3_log, transform
 from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
@@ -49,7 +49,8 @@ from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, p
 from dynaslam2.tracking.appearance import gallery_distance, instance_histograms
 from dynaslam2.tracking.box_association import BoxAssociation, instance_boxes, keypoint_boxes
 from dynaslam2.tracking.mask_measurement import MaskMeasurement
-from dynaslam2.tracking.object_filter import capped_angular_velocity, filter_position, filter_rotation, gated
+from dynaslam2.tracking.object_filter import (capped_angular_velocity, filter_position, filter_rotation, gated,
+                                               predicted_rotation)
 
 DYNAMIC_CLASS_IDS = np.array(sorted(CLASS_IDS[c] for c in DYNAMIC_CLASSES), dtype=np.int64)
 
@@ -528,7 +529,7 @@ class ObjectTracker:
         """Pose-only pose `T_w_o` of points `pts` with the track's predicted rotation (the last one turned at its
         capped w_o over `dt`) in place of the measured one, moved so that the points' centroid stays where the
         pose-only put it (objects.translation_only_classes)."""
-        R_pred = track.last.T_w_o[:3, :3] @ so3_exp(capped_angular_velocity(track.last.w_o, self.cfg) * dt)
+        R_pred = predicted_rotation(track, dt, self.cfg)
         T = T_w_o.copy()
         T[:3, 3] += (T_w_o[:3, :3] - R_pred) @ objects.points.X_o[pts].mean(axis=0)
         T[:3, :3] = R_pred
