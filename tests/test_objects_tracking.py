@@ -1565,3 +1565,29 @@ def test_a_keyframe_gives_a_tracked_object_the_points_it_shows(kf_points_all_obj
         assert tid in front.weak
     else:
         assert n_added == 0
+
+
+@pytest.mark.parametrize("spare", [True, False])
+def test_a_vote_does_not_take_an_object_from_the_track_begun_for_it_while_its_old_one_was_lost(spare):
+    """A car tracked at 15 m stops while hidden for 1 s (beyond join_max_gap_s): its old track's prediction runs
+    on 2 m, and it comes back with a new appearance, so a new track is begun and confirmed on it. Two frames later
+    its old appearance is back, its old track's prediction finds nothing and a point vote finds the old track: with
+    objects.vote_spares_successor the car stays with the track seen on it a frame earlier (the id reported last),
+    without it the old id comes back for a frame (crossing s84 gt4 f95, an unoccluded car)."""
+    rng = np.random.default_rng(29)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * min(i, 4), 0.8, 15.0])) for i in range(20)]
+    objects, trk = ObjectMap(), tracker(f"objects.vote_spares_successor={str(spare).lower()}")
+    old = track_alone(trk, objects, car, T_car[:5]).track_id
+    for i in range(5, 15):
+        trk.track(make_frame(i, []), None, objects)
+    assert 14 * DT - 4 * DT > trk.cfg.join_max_gap_s
+    desc = car.desc.copy()
+    car.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
+    for i in range(15, 18):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    young = e.track_id
+    assert young != old and old in objects.tracks and len(objects.tracks[young].observations) == 3
+    car.desc = desc
+    (e,) = trk.track(make_frame(18, [(car, T_car[18])]), None, objects).estimates
+    assert e.track_id == (young if spare else old)

@@ -129,14 +129,22 @@ class BoxAssociation:
         return (self.camera.project(X_c_last).mean(axis=0), self.camera.project(X_c_pred).mean(axis=0),
                 float(np.median(X_c_last[:, 2] / X_c_pred[:, 2])))  # image size ~ 1 / depth
 
-    def touches(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
-                box: np.ndarray) -> bool:
-        """Whether `box` overlaps the track's last box (`_last_box`) or its predicted box at all: a vote whose pose
-        failed joins only a track that could be there (a false vote took a bus leaving at the right border to an
-        instance entering at the left)."""
+    def overlap(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                box: np.ndarray) -> float:
+        """The IoU of `box` with the track's last box (`_last_box`) or its predicted box, the larger (0 for a NaN
+        box)."""
+        if not np.all(np.isfinite(box)):
+            return 0.0
         moved = self.predicted_box(track, frame, T_w_o_pred, objects)
         track_boxes = [self._last_box(track, frame.timestamp)] + ([moved] if moved is not None else [])
-        return bool(np.all(np.isfinite(box)) and box_iou(box[None], np.array(track_boxes, dtype=float))[0].max() > 0)
+        return float(box_iou(box[None], np.array(track_boxes, dtype=float))[0].max())
+
+    def touches(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                box: np.ndarray) -> bool:
+        """Whether `box` overlaps the track's last box or its predicted box at all (`overlap`): a vote whose pose
+        failed joins only a track that could be there (a false vote took a bus leaving at the right border to an
+        instance entering at the left)."""
+        return self.overlap(frame, objects, track, T_w_o_pred, box) > 0
 
     def assign(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
                boxes: np.ndarray, classes: list[str], X_w: list[np.ndarray], looks: dict[int, np.ndarray] | None,

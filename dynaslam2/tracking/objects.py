@@ -598,9 +598,25 @@ class ObjectTracker:
         if not unseen or len(kp) < self.cfg.min_inliers:
             return None, None
         voted = self._vote(frame, objects, unseen, kp)
-        if voted is None or not self._in_view(frame, objects, voted[0], pred[voted[0].track_id]):
+        if (voted is None or not self._in_view(frame, objects, voted[0], pred[voted[0].track_id])
+                or self._successor(frame, objects, unseen, pred, voted[0], box) is not None):
             return None, None
         return self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted), voted[0]
+
+    def _successor(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
+                   voted: ObjectTrack, box: np.ndarray) -> ObjectTrack | None:
+        """The track begun for the voted track's object while that one was lost, or None: a confirmed unseen track
+        (reported: >= min_output_observations observations) of its class, first observed after the voted track's
+        last observation, seen in the previous frame on a box that overlaps the instance's `box` by >= join_iou
+        (objects.vote_spares_successor). A tentative one was never reported: the old id back is no switch."""
+        cfg = self.cfg
+        if not cfg.vote_spares_successor:
+            return None
+        return next((tr for tr in unseen
+                     if tr is not voted and tr.cls == voted.cls and tr.last.frame_index == frame.index - 1
+                     and len(tr.observations) >= cfg.min_output_observations
+                     and tr.observations[0].frame_index > voted.last.frame_index
+                     and self.boxes.overlap(frame, objects, tr, pred[tr.track_id], box) >= cfg.join_iou), None)
 
     def _box_join(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, inst: int,
                   points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray,
