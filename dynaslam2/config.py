@@ -549,10 +549,11 @@ class ObjectsConfig:
     join_ratio: float = 0.5
     min_join_matches: int = 6
     # Not in the paper: a vote does not take an instance from the track begun for the voted object while that one
-    # was lost (its successor: confirmed, first observed after the voted track's last observation, seen in the previous frame
-    # on a box that overlaps the instance's by >= join_iou); the successor keeps it by its box. A vote there gave
-    # the object's old id back for a frame (crossing s84 gt4 f95-96, an unoccluded car: the old track, lost at f89
-    # with its origin 5 m off, voted at f95 with 24 inliers; its successor took the car back by box at f96).
+    # was lost (its successor: confirmed, first observed after the voted track's last observation, seen in the
+    # previous frame on a box that overlaps the instance's by >= join_iou); the successor keeps it by its box. A vote
+    # there gave the object's old id back for a frame (crossing s84 gt4 f95-96, an unoccluded car: the old track,
+    # lost at f89 with its origin 5 m off, voted at f95 with 24 inliers; its successor took the car back by box at
+    # f96).
     # bench_dynamic's scenarios (world 3, 150 fr, 640x480), 16 groups (seeds 0-9 of the four scenarios, 10-39 of
     # traffic, crossing, static, crossing 40-129, following 10-39), without -> with: two sequences changed, crossing
     # s84 (unoccluded id switches 2 -> 0, object ATE 0.668 -> 0.606 m) and s64 (0.323 -> 0.309 m, TP 0.691 ->

@@ -1570,10 +1570,10 @@ def test_a_keyframe_gives_a_tracked_object_the_points_it_shows(kf_points_all_obj
 @pytest.mark.parametrize("spare", [True, False])
 def test_a_vote_does_not_take_an_object_from_the_track_begun_for_it_while_its_old_one_was_lost(spare):
     """A car tracked at 15 m stops while hidden for 1 s (beyond join_max_gap_s): its old track's prediction runs
-    on 2 m, and it comes back with a new appearance, so a new track is begun and confirmed on it. Two frames later
-    its old appearance is back, its old track's prediction finds nothing and a point vote finds the old track: with
-    objects.vote_spares_successor the car stays with the track seen on it a frame earlier (the id reported last),
-    without it the old id comes back for a frame (crossing s84 gt4 f95, an unoccluded car)."""
+    on 2.8 m, and it comes back with a new appearance, so a new track is begun and confirmed on it. Three frames
+    later its old appearance is back, its old track's prediction finds nothing and a point vote finds the old track:
+    with objects.vote_spares_successor the car stays with the track seen on it a frame earlier (the id reported
+    last), without it the old id comes back (crossing s84 gt4 f95, an unoccluded car)."""
     rng = np.random.default_rng(29)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * min(i, 4), 0.8, 15.0])) for i in range(20)]
