@@ -486,7 +486,7 @@ def test_object_creation_thresholds():
                                        ("box_velocity_window_s", -0.1), ("join_contain", 1.5),
                                        ("register_chi2", 0), ("appearance_max_distance", 1.5),
                                        ("appearance_bins", 0), ("appearance_bins", 17), ("appearance_gallery", 0),
-                                       ("translation_only_classes", "[bike]")])
+                                       ("translation_only_classes", "[bike]"), ("join_owner_extent_fraction", 1.5)])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 
@@ -1591,3 +1591,28 @@ def test_a_vote_does_not_take_an_object_from_the_track_begun_for_it_while_its_ol
     car.desc = desc
     (e,) = trk.track(make_frame(18, [(car, T_car[18])]), None, objects).estimates
     assert e.track_id == (young if spare else old)
+
+
+@pytest.mark.parametrize("min_fraction", [0.1, 0.0])
+def test_a_vehicle_track_does_not_join_by_box_an_instance_in_another_tracks_extent(min_fraction):
+    """Two cars, one 25 m away behind the other at 18 m; the near car's last observation was a sliver (its right
+    end), so its moved box hardly overlaps its instance, and it comes back whole with other descriptors (no pose
+    claim) while the far car is hidden behind it. The far car's moved box lies inside the near car's instance box,
+    but none of that instance's stereo points lie in the far car's predicted 3D extent, and the near car's track's
+    extent holds them: with objects.join_min_extent_fraction the far car's track is not box-joined to it and the near
+    car keeps its track (by its extent); without it the far car's track takes the near car (crossing s120 f82: two
+    cars swapped their tracks behind an occluder)."""
+    rng = np.random.default_rng(31)
+    far, near = Body(rng, 1001, 80, (4.0, 1.5, 1.5)), Body(rng, 1002, 80, (4.0, 1.5, 1.5))
+    T_far = [make_pose(np.eye(3), np.array([0.4 + 0.2 * i, 0.8, 25.0])) for i in range(6)]
+    T_near = make_pose(np.eye(3), np.array([1.0, 0.8, 18.0]))
+    sliver = near.part(near.X_b[:, 0] > 1.5)
+    objects, trk = ObjectMap(), tracker(f"objects.join_min_extent_fraction={min_fraction}")
+    for i in range(5):
+        trk.track(make_frame(i, [(far, T_far[i]), (near if i < 4 else sliver, T_near)]), None, objects)
+    assert len(objects.tracks) == 2 and all(tr.last.frame_index == 4 for tr in objects.tracks.values())
+    track_far, track_near = (next(t for t, tr in objects.tracks.items() if tr.last.instance_id == inst)
+                             for inst in (1001, 1002))
+    near.desc = rng.integers(0, 256, near.desc.shape).astype(np.uint8)
+    (e,) = trk.track(make_frame(5, [(near, T_near)]), None, objects).estimates
+    assert e.track_id == (track_near if min_fraction > 0 else track_far)

@@ -157,7 +157,9 @@ class BoxAssociation:
         not judged; None: appearance off). SORT's Hungarian assignment (`_hungarian`) in DeepSORT's cascade of
         `stages`, each over the boxes and tracks the earlier ones left, first for the confirmed tracks (>=
         min_output_observations observations), then for the tentative ones (DeepSORT's order: a track begun on an
-        object's partial view a frame ago cannot outbid the object's own track):
+        object's partial view a frame ago cannot outbid the object's own track); no stage joins a vehicle track to an
+        instance whose stereo points lie outside its predicted 3D extent and in another candidate's
+        (`_in_another_extent`):
         "moved": by the overlap of each track's last box moved by its predicted image motion (`predicted_box`;
         `_join_overlap` >= join_iou), so that the last box of an object that has left where this one is now cannot
         take it; ranked by the IoU less the gallery distance (DeepSORT's appearance in the cost: a neighbour's box
@@ -197,6 +199,7 @@ class BoxAssociation:
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
+        free &= ~self._in_another_extent(objects, recent, pred, X_w, free & ((iou_moved > 0) | (iou_last > 0)))
 
         def score(stage: str, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
             """(cost, allowed) of `stage` over the candidate pairs `cand` (K, T); None: the stage is off."""
@@ -249,6 +252,25 @@ class BoxAssociation:
                         free[k, :] = False
                         free[:, t] = False
         return joined
+
+    def _in_another_extent(self, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
+                           X_w: list[np.ndarray], cand: np.ndarray) -> np.ndarray:
+        """(K, T) the candidate pairs `cand` that no box stage joins: an instance with >= min_inliers stereo points
+        `X_w` of which less than join_min_extent_fraction lie in a velocity-known vehicle track's predicted 3D extent
+        (`extent_fraction`), while >= join_owner_extent_fraction lie in another candidate track's (crossing s120 f82:
+        a car's track, predicted 25.5 m away, took by its moved box the instance of a nearer car at 19.4 m that its
+        own track's extent held, and the two cars swapped tracks). The other track's extent alone does not join it."""
+        cfg = self.cfg
+        frac = np.full(cand.shape, np.nan)
+        if cfg.join_min_extent_fraction <= 0:
+            return np.zeros(cand.shape, dtype=bool)
+        for t in np.flatnonzero(cand.any(axis=0)):
+            tr = tracks[t]
+            rows = [k for k in np.flatnonzero(cand[:, t]) if len(X_w[k]) >= cfg.min_inliers]
+            if rows and tr.velocity_known and tr.cls in VEHICLE_CLASSES:
+                frac[rows, t] = self.extent_fraction(objects, tr, pred[tr.track_id], [X_w[k] for k in rows])
+        owned = np.nan_to_num(frac) >= cfg.join_owner_extent_fraction
+        return (frac < cfg.join_min_extent_fraction) & (owned.sum(axis=1, keepdims=True) - owned > 0)
 
     def extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
                         X_w: list[np.ndarray]) -> np.ndarray:
