@@ -261,9 +261,9 @@ class BoxAssociation:
         a car's track, predicted 25.5 m away, took by its moved box the instance of a nearer car at 19.4 m that its
         own track's extent held, and the two cars swapped tracks). The other track's extent alone does not join it."""
         cfg = self.cfg
-        frac = np.full(cand.shape, np.nan)
         if cfg.join_min_extent_fraction <= 0:
             return np.zeros(cand.shape, dtype=bool)
+        frac = np.full(cand.shape, np.nan)  # NaN: not judged (no vehicle track with a velocity, too few points)
         for t in np.flatnonzero(cand.any(axis=0)):
             tr = tracks[t]
             rows = [k for k in np.flatnonzero(cand[:, t]) if len(X_w[k]) >= cfg.min_inliers]
