@@ -954,9 +954,10 @@ class ObjectsConfig:
     # 0.286 / 0.277 m, following 10-19 / 20-39 0.169 / 0.186 -> 0.164 / 0.183 m (the paper's selection lower on 10
     # of 12); TP within 0.2 points; id switches on unoccluded tracks 0 -> 2 (crossing s84 gt4 f95-96, a car: its old
     # track, lost at f89 with its origin 5 m off, re-takes it by a point vote for one frame from the track begun for
-    # it at f91); short gaps lost on the fresh groups 9 -> 11. On two groups first run after it was set, crossing
-    # 100-114 and traffic, crossing, static 30-34: 0.315 / 0.179 -> 0.287 / 0.172 m, TP 78.3 / 83.6 -> 78.6 / 83.6 %,
-    # unoccluded switches 1 (crossing s111 gt24) / 0 -> 0 / 0, short gaps 122 of 122, 31 of 31 either way.
+    # it at f91; none since vote_spares_successor); short gaps lost on the fresh groups 9 -> 11. On two groups first
+    # run after it was set, crossing 100-114 and traffic, crossing, static 30-34: 0.315 / 0.179 -> 0.287 / 0.172 m, TP
+    # 78.3 / 83.6 -> 78.6 / 83.6 %, unoccluded switches 1 (crossing s111 gt24) / 0 -> 0 / 0, short gaps 122 of 122, 31
+    # of 31 either way.
     translation_only_classes: tuple[str, ...] = ("pedestrian",)
     # Validation gate: a pose-only position whose NIS against the filter's prediction exceeds this
     # (chi2, 3 dof) is rejected as an association outlier; inf: no gate.
