@@ -199,7 +199,8 @@ class BoxAssociation:
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
-        free &= ~self._in_another_extent(objects, recent, pred, X_w, free & ((iou_moved > 0) | (iou_last > 0)))
+        vetoed, heir = self._in_another_extent(objects, recent, pred, X_w, free & ((iou_moved > 0) | (iou_last > 0)))
+        free &= ~vetoed
 
         def score(stage: str, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
             """(cost, allowed) of `stage` over the candidate pairs `cand` (K, T); None: the stage is off."""
@@ -214,7 +215,7 @@ class BoxAssociation:
                             rows = np.flatnonzero(cand[:, t])
                             cost[rows, t] = -self.extent_fraction(objects, recent[t], pred[recent[t].track_id],
                                                                   [X_w[k] for k in rows])
-                ok = (cost < 0) & (-cost >= cfg.extent_min_fraction)
+                ok = (cost < 0) & ((-cost >= cfg.extent_min_fraction) | heir & cfg.join_vetoed_to_owner)
             elif stage == "appearance":
                 cost = np.full(cand.shape, np.inf)
                 for t in np.flatnonzero(cand.any(axis=0)):
@@ -254,15 +255,17 @@ class BoxAssociation:
         return joined
 
     def _in_another_extent(self, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
-                           X_w: list[np.ndarray], cand: np.ndarray) -> np.ndarray:
-        """(K, T) the candidate pairs `cand` that no box stage joins: an instance with >= min_inliers stereo points
-        `X_w` of which less than join_min_extent_fraction lie in a velocity-known vehicle track's predicted 3D extent
-        (`extent_fraction`), while >= join_owner_extent_fraction lie in another candidate track's (crossing s120 f82:
-        a car's track, predicted 25.5 m away, took by its moved box the instance of a nearer car at 19.4 m that its
-        own track's extent held, and the two cars swapped tracks). The other track's extent alone does not join it."""
+                           X_w: list[np.ndarray], cand: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K, T) the candidate pairs `cand` that no box stage joins, and the pairs the "extent" stage joins at
+        join_owner_extent_fraction. The first: an instance with >= min_inliers stereo points `X_w` of which less than
+        join_min_extent_fraction lie in a velocity-known vehicle track's predicted 3D extent (`extent_fraction`),
+        while >= join_owner_extent_fraction lie in another candidate track's (crossing s120 f82: a car's track,
+        predicted 25.5 m away, took by its moved box the instance of a nearer car at 19.4 m that its own track's
+        extent held, and the two cars swapped tracks). The second: that other track and the vetoed instance (the
+        nearer car's track, its moved box off and its extent holding 0.61 of the points, then lost its car)."""
         cfg = self.cfg
         if cfg.join_min_extent_fraction <= 0:
-            return np.zeros(cand.shape, dtype=bool)
+            return np.zeros(cand.shape, dtype=bool), np.zeros(cand.shape, dtype=bool)
         frac = np.full(cand.shape, np.nan)  # NaN: not judged (no vehicle track with a velocity, too few points)
         for t in np.flatnonzero(cand.any(axis=0)):
             tr = tracks[t]
@@ -270,7 +273,8 @@ class BoxAssociation:
             if rows and tr.velocity_known and tr.cls in VEHICLE_CLASSES:
                 frac[rows, t] = self.extent_fraction(objects, tr, pred[tr.track_id], [X_w[k] for k in rows])
         owned = np.nan_to_num(frac) >= cfg.join_owner_extent_fraction
-        return (frac < cfg.join_min_extent_fraction) & (owned.sum(axis=1, keepdims=True) - owned > 0)
+        vetoed = (frac < cfg.join_min_extent_fraction) & (owned.sum(axis=1, keepdims=True) - owned > 0)
+        return vetoed, owned & vetoed.any(axis=1, keepdims=True)
 
     def extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
                         X_w: list[np.ndarray]) -> np.ndarray:
