@@ -170,8 +170,9 @@ class BoxAssociation:
         moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
         car passing the camera, a box clipped to the image border);
         "extent": by the fraction of the instance's stereo points `X_w` inside a velocity-known vehicle track's
-        predicted 3D extent (`extent_fraction` >= extent_min_fraction; a pedestrian's grown extent holds its
-        neighbour);
+        predicted 3D extent (`extent_fraction` >= extent_min_fraction, or >= join_owner_extent_fraction for the track
+        whose extent held an instance vetoed from another, objects.join_vetoed_to_owner; a pedestrian's grown extent
+        holds its neighbour);
         "young": likewise to a track without a velocity (its 3D prediction stands still) whose `_last_box` overlaps
         the instance's, when its class has a speed prior tighter than initial_speed_sigma (`initial_speed_sigma`:
         pedestrians) for its filter to start from;
@@ -199,7 +200,7 @@ class BoxAssociation:
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
-        vetoed, heir = self._in_another_extent(objects, recent, pred, X_w, free & ((iou_moved > 0) | (iou_last > 0)))
+        vetoed, owners = self._in_another_extent(objects, recent, pred, X_w, free & ((iou_moved > 0) | (iou_last > 0)))
         free &= ~vetoed
 
         def score(stage: str, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -215,7 +216,7 @@ class BoxAssociation:
                             rows = np.flatnonzero(cand[:, t])
                             cost[rows, t] = -self.extent_fraction(objects, recent[t], pred[recent[t].track_id],
                                                                   [X_w[k] for k in rows])
-                ok = (cost < 0) & ((-cost >= cfg.extent_min_fraction) | heir & cfg.join_vetoed_to_owner)
+                ok = (cost < 0) & ((-cost >= cfg.extent_min_fraction) | owners & cfg.join_vetoed_to_owner)
             elif stage == "appearance":
                 cost = np.full(cand.shape, np.inf)
                 for t in np.flatnonzero(cand.any(axis=0)):
