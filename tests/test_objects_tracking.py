@@ -899,11 +899,13 @@ def test_box_association_reanchors_a_track_whose_prediction_ran_off():
     """A car tracked at 15 m whose track ran off to 30 m along the viewing ray (as pose-only estimates from a
     few monocular matches did on an occluded car, sim following s15) re-appears with a new appearance and joins
     its track by box IoU. Its points would lie 15 m from the track's: the track is moved onto them (velocity
-    forgotten), so the points added sit on the body and the next frames are right, with one id."""
+    forgotten), so the points added sit on the body and the next frames are right, with one id. The re-anchor gate
+    is off (objects.reanchor_gate_nis): the run-off is written here into a track measured a frame earlier, whose
+    filter then excludes the re-anchor; on s15 it came after 2.4 s without a measurement."""
     rng = np.random.default_rng(16)
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * i, 0.8, 15.0])) for i in range(8)]
-    objects, trk = ObjectMap(), tracker()
+    objects, trk = ObjectMap(), tracker("objects.reanchor_gate_nis=inf")
     e = track_alone(trk, objects, car, T_car[:4])
     tr = objects.tracks[e.track_id]
     T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
@@ -1601,13 +1603,15 @@ def test_a_vehicle_track_does_not_join_by_box_an_instance_in_another_tracks_exte
     but none of that instance's stereo points lie in the far car's predicted 3D extent, and the near car's track's
     extent holds them: with objects.join_min_extent_fraction the far car's track is not box-joined to it and the near
     car keeps its track (by its extent); without it the far car's track takes the near car (crossing s120 f82: two
-    cars swapped their tracks behind an occluder)."""
+    cars swapped their tracks behind an occluder). The re-anchor gate is off: without the veto it would keep the far
+    car's track at its prediction, without the near car's points (objects.reanchor_gate_nis)."""
     rng = np.random.default_rng(31)
     far, near = Body(rng, 1001, 80, (4.0, 1.5, 1.5)), Body(rng, 1002, 80, (4.0, 1.5, 1.5))
     T_far = [make_pose(np.eye(3), np.array([0.4 + 0.2 * i, 0.8, 25.0])) for i in range(6)]
     T_near = make_pose(np.eye(3), np.array([1.0, 0.8, 18.0]))
     sliver = near.part(near.X_b[:, 0] > 1.5)
-    objects, trk = ObjectMap(), tracker(f"objects.join_min_extent_fraction={min_fraction}")
+    objects = ObjectMap()
+    trk = tracker(f"objects.join_min_extent_fraction={min_fraction}", "objects.reanchor_gate_nis=inf")
     for i in range(5):
         trk.track(make_frame(i, [(far, T_far[i]), (near if i < 4 else sliver, T_near)]), None, objects)
     assert len(objects.tracks) == 2 and all(tr.last.frame_index == 4 for tr in objects.tracks.values())
@@ -1644,3 +1648,37 @@ def test_an_instance_vetoed_from_a_track_joins_the_track_whose_extent_holds_it(t
     (e,) = trk.track(make_frame(5, [(near, T_near)]), None, objects).estimates
     assert e.track_id == track_near if to_owner else e.track_id not in (track_near, track_far)
 
+
+@pytest.mark.parametrize("deeper_m", [8.0, 14.0])
+@pytest.mark.parametrize("gate_nis", [11.34, float("inf")])
+def test_a_box_join_does_not_move_a_track_measured_a_moment_ago_where_its_filter_cannot_be(gate_nis, deeper_m):
+    """A car measured at 15 m a frame ago; in its place in the image an instance whose stereo points all lie
+    `deeper_m` deeper, with other descriptors: its box overlaps the car's predicted box, no keypoint registers, and
+    its points' median lies beyond max_point_spread_m of the track's, so that without objects.reanchor_gate_nis the
+    box join re-anchors the track onto them (crossing s41 f47: a truck measured 0.1 s earlier, its predicted position
+    sigma 0.07 m, re-anchored 7.9 m deeper on 7 keypoints of its far end). With it the filter's prediction excludes
+    the re-anchored position: within reanchor_other_object_m (a part of a long vehicle, or wrong depths) the track
+    keeps the instance at its prediction and takes none of its points; beyond (another object: crossing s80, 16-25
+    m) it does not join it, and a new track is begun. Either way the track is measured on the car the next frame."""
+    rng = np.random.default_rng(37)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([0.2 * i, 0.8, 15.0])) for i in range(8)]
+    objects, trk = ObjectMap(), tracker(f"objects.reanchor_gate_nis={gate_nis}")
+    e = track_alone(trk, objects, car, T_car[:6])
+    track = objects.tracks[e.track_id]
+    n_points = len(objects.points.of_track(e.track_id))
+    ghost = car.part(np.ones(len(car.X_b), dtype=bool), rng=rng)
+    T_ghost = T_car[6].copy()
+    T_ghost[:3, 3] *= (15.0 + deeper_m) / 15.0  # along the ray: the same place in the image, deeper
+    trk.track(make_frame(6, [(ghost, T_ghost)]), None, objects)
+    jump = np.linalg.norm(track.last.T_w_o[:3, 3] - e.T_w_o[:3, 3])
+    if not np.isfinite(gate_nis):
+        assert track.last.frame_index == 6 and jump > 5.0
+        return
+    if deeper_m < trk.cfg.reanchor_other_object_m:
+        assert track.last.frame_index == 6 and jump < 0.5 and len(objects.points.of_track(e.track_id)) == n_points
+    else:
+        assert track.last.frame_index == 5 and len(objects.tracks) == 2
+    (e7,) = [x for x in trk.track(make_frame(7, [(car, T_car[7])]), None, objects).estimates
+             if x.track_id == e.track_id]
+    assert np.linalg.norm(e7.T_w_o[:3, 3] - e.T_w_o[:3, 3]) < 0.6

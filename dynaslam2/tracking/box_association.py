@@ -19,7 +19,7 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, transform
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectTrack
-from dynaslam2.tracking.object_filter import initial_speed_sigma, predict_state
+from dynaslam2.tracking.object_filter import gated, initial_speed_sigma, predict_state
 
 
 def _hungarian(cost: np.ndarray, ok: np.ndarray) -> list[tuple[int, int]]:
@@ -30,6 +30,34 @@ def _hungarian(cost: np.ndarray, ok: np.ndarray) -> list[tuple[int, int]]:
     forbidden = 1.0 + 2.0 * ok.sum() * np.abs(cost[ok]).max()  # > any two allowed assignments' difference
     rows, cols = linear_sum_assignment(np.where(ok, cost, forbidden))
     return [(k, t) for k, t in zip(rows.tolist(), cols.tolist()) if ok[k, t]]
+
+
+def reanchored_pose(objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray,
+                    spread_m: float | None) -> np.ndarray | None:
+    """The predicted pose translated so that the median of an instance's world points `X_w` lands on the track's
+    median point, when that median lies beyond `spread_m` of the box of the track's points (object frame: the
+    prediction ran off, or the points are not the track's object; None: always); None when it lies within, or
+    without points."""
+    X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
+    if not len(X_o) or not len(X_w):
+        return None
+    R, t = T_w_o_pred[:3, :3], T_w_o_pred[:3, 3]
+    median_new = np.median((X_w - t) @ R, axis=0)
+    outside = np.maximum(X_o.min(axis=0) - median_new, 0.0) + np.maximum(median_new - X_o.max(axis=0), 0.0)
+    if spread_m is not None and np.linalg.norm(outside) <= spread_m:
+        return None
+    T_w_o = T_w_o_pred.copy()
+    T_w_o[:3, 3] = t + R @ (median_new - np.median(X_o, axis=0))
+    return T_w_o
+
+
+def implausible_jump(track: ObjectTrack, timestamp: float, p_w: np.ndarray, cfg: ObjectsConfig) -> bool:
+    """Whether the track, measured within join_max_gap_s of `timestamp`, cannot be at `p_w` then: its filter's
+    prediction excludes it (`gated` at reanchor_gate_nis, `p_w` exact but for the position floor)."""
+    measured = [o.timestamp for o in track.observations if o.measured]
+    exact = np.eye(3) * 1e12
+    return bool(measured and timestamp - measured[-1] <= cfg.join_max_gap_s
+                and gated(track, timestamp - track.last.timestamp, p_w, lambda: exact, cfg, nis=cfg.reanchor_gate_nis))
 
 
 def instance_boxes(instances: np.ndarray, ids: np.ndarray) -> np.ndarray:
@@ -200,8 +228,9 @@ class BoxAssociation:
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
-        vetoed, owners = self._in_another_extent(objects, recent, pred, X_w, free & ((iou_moved > 0) | (iou_last > 0)))
-        free &= ~vetoed
+        touching = (iou_moved > 0) | (iou_last > 0)
+        vetoed, owners = self._in_another_extent(objects, recent, pred, X_w, free & touching)
+        free &= ~vetoed & ~self._jumps(frame, objects, recent, pred, X_w, free & touching)
 
         def score(stage: str, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
             """(cost, allowed) of `stage` over the candidate pairs `cand` (K, T); None: the stage is off."""
@@ -276,6 +305,25 @@ class BoxAssociation:
         owned = np.nan_to_num(frac) >= cfg.join_owner_extent_fraction
         vetoed = (frac < cfg.join_min_extent_fraction) & (owned.sum(axis=1, keepdims=True) - owned > 0)
         return vetoed, owned & vetoed.any(axis=1, keepdims=True)
+
+    def _jumps(self, frame: Frame, objects: ObjectMap, tracks: list[ObjectTrack], pred: dict[int, np.ndarray],
+               X_w: list[np.ndarray], cand: np.ndarray) -> np.ndarray:
+        """(K, T) the candidate pairs `cand` that no box stage joins: an instance with >= min_inliers stereo points
+        `X_w` whose join would re-anchor a track (`reanchored_pose`) by more than reanchor_other_object_m to where
+        its filter, measured within join_max_gap_s, cannot be (`implausible_jump`): another object (crossing s80:
+        16-25 m shifts of tracks measured 0.5-0.8 s earlier)."""
+        cfg = self.cfg
+        out = np.zeros(cand.shape, dtype=bool)
+        if not np.isfinite(cfg.reanchor_gate_nis):
+            return out
+        for k, t in zip(*np.nonzero(cand)):
+            if len(X_w[k]) >= cfg.min_inliers:
+                T_w_o_pred = pred[tracks[t].track_id]
+                T_w_o = reanchored_pose(objects, tracks[t], T_w_o_pred, X_w[k], cfg.max_point_spread_m)
+                out[k, t] = (T_w_o is not None
+                             and np.linalg.norm(T_w_o[:3, 3] - T_w_o_pred[:3, 3]) > cfg.reanchor_other_object_m
+                             and implausible_jump(tracks[t], frame.timestamp, T_w_o[:3, 3], cfg))
+        return out
 
     def extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
                         X_w: list[np.ndarray]) -> np.ndarray:

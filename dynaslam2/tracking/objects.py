@@ -47,7 +47,8 @@ from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, predict_object_pose
 from dynaslam2.tracking.appearance import gallery_distance, instance_histograms
-from dynaslam2.tracking.box_association import BoxAssociation, instance_boxes, keypoint_boxes
+from dynaslam2.tracking.box_association import (BoxAssociation, implausible_jump, instance_boxes, keypoint_boxes,
+                                                  reanchored_pose)
 from dynaslam2.tracking.mask_measurement import MaskMeasurement
 from dynaslam2.tracking.object_filter import (capped_angular_velocity, filter_position, filter_rotation, gated,
                                                predicted_rotation)
@@ -638,7 +639,9 @@ class ObjectTracker:
             T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
         rest = ~np.isin(kp, kp_in)
         if not len(kp_in) and len(kp):
-            T_w_o = self._reanchor(objects, track, T_w_o, X_w, always=reanchor)
+            T_w_o, keep = self._reanchor(frame, objects, track, T_w_o, X_w, always=reanchor)
+            if not keep:
+                rest[:] = False
             # (a re-anchored track has forgotten its velocity, so the extent rule leaves its points alone)
             if self._outside_extent(objects, track, T_w_o_pred, lambda: X_w, self.cfg.join_points_min_extent_fraction):
                 rest[:] = False
@@ -796,27 +799,23 @@ class ObjectTracker:
         along = ray[:, :, None] * ray[:, None, :]
         return along / var_along[:, None, None] + (np.eye(3) - along) / var_across[:, None, None]
 
-    def _reanchor(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray,
-                  always: bool = False) -> np.ndarray:
-        """The pose at which a box join adds the instance's points `X_w` to `track`: the prediction, or, when
-        their median would lie beyond max_point_spread_m of the box of the track's points (object frame; a
-        prediction run off, e.g. in depth while the object was seen without stereo) or `always` (a track
-        re-identified after up to max_lost_s), the prediction translated so that their median lands on the track's
-        median point, with the track's velocity and filter state forgotten."""
-        X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
-        if not len(X_o):
-            return T_w_o_pred
-        R, t = T_w_o_pred[:3, :3], T_w_o_pred[:3, 3]
-        median_new = np.median((X_w - t) @ R, axis=0)
-        outside = np.maximum(X_o.min(axis=0) - median_new, 0.0) + np.maximum(median_new - X_o.max(axis=0), 0.0)
-        if not always and np.linalg.norm(outside) <= self.cfg.max_point_spread_m:
-            return T_w_o_pred
-        shift = median_new - np.median(X_o, axis=0)
-        T_w_o = T_w_o_pred.copy()
-        T_w_o[:3, 3] = t + R @ shift
+    def _reanchor(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
+                  X_w: np.ndarray, always: bool = False) -> tuple[np.ndarray, bool]:
+        """(pose, whether to add the points): the pose at which a box join adds the instance's points `X_w` to
+        `track`: the prediction, or, when their median would lie beyond max_point_spread_m of the box of the track's
+        points (object frame; a prediction run off, e.g. in depth while the object was seen without stereo) or
+        `always` (a track re-identified after up to max_lost_s), the prediction translated so that their median
+        lands on the track's median point (`reanchored_pose`), with the track's velocity and filter state forgotten.
+        Where the filter of a track measured within join_max_gap_s excludes that (`implausible_jump`: a part of a
+        long vehicle not seen before, or wrong depths), the prediction, and the points are not added."""
+        T_w_o = reanchored_pose(objects, track, T_w_o_pred, X_w, None if always else self.cfg.max_point_spread_m)
+        if T_w_o is None:
+            return T_w_o_pred, True
+        if not always and implausible_jump(track, frame.timestamp, T_w_o[:3, 3], self.cfg):
+            return T_w_o_pred, False
         track.state_mean, track.state_cov = None, None
         track.velocity_known = False
-        return T_w_o
+        return T_w_o, True
 
     def _cull(self, objects: ObjectMap, track_ids: list[int]) -> None:
         """Drop object points of the tracked objects that are rarely found where they project."""
