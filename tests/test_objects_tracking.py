@@ -1646,7 +1646,7 @@ def test_an_instance_vetoed_from_a_track_joins_the_track_whose_extent_holds_it(t
     assert trk.cfg.join_owner_extent_fraction <= held < trk.cfg.extent_min_fraction
     near.desc = rng.integers(0, 256, near.desc.shape).astype(np.uint8)
     (e,) = trk.track(make_frame(5, [(near, T_near)]), None, objects).estimates
-    assert e.track_id == track_near if to_owner else e.track_id not in (track_near, track_far)
+    assert (e.track_id == track_near) if to_owner else (e.track_id not in (track_near, track_far))
 
 
 @pytest.mark.parametrize("deeper_m", [8.0, 14.0])
