@@ -429,6 +429,12 @@ class ObjectsConfig:
     # Creation: an unclaimed dynamic-class instance with this many keypoints with stereo depth
     # closer than max_point_depth_m ("new nearby keypoints") creates an object.
     min_new_points: int = 10
+    # Opt-in (MEASURE_PLACEHOLDER): an instance of these classes short of min_new_points close keypoints also counts
+    # its keypoints without stereo depth, placed at its mask's depth (`MaskMeasurement.depth`, found within
+    # mask_depth_max_m) and weighted by the mask disparity's sigma, unless a track of its class seen within
+    # join_max_gap_s could be there.
+    mask_depth_classes: tuple[str, ...] = ()
+    mask_depth_max_m: float = 30.0
     # A small (far) instance with fewer also creates one when its close keypoints are >= min_inliers
     # and >= small_new_fraction of its free keypoints (0 disables). Off: bench_dynamic's 20 sequences
     # (traffic, following, crossing, static s0-s4, 150 fr, 640x480), 0 -> 0.5: TP 0.751 -> 0.774 (pedestrians
@@ -996,10 +1002,11 @@ class ObjectsConfig:
         if not 1 <= self.appearance_bins <= 16:
             raise ConfigError(f"objects.appearance_bins: expected an integer in [1, 16] (bins per colour channel), "
                               f"got {self.appearance_bins}")
-        unknown = [c for c in self.translation_only_classes if c not in DYNAMIC_CLASSES]
-        if unknown:
-            raise ConfigError(f"objects.translation_only_classes: expected class names among "
-                              f"{', '.join(sorted(DYNAMIC_CLASSES))}, got {unknown[0]!r}")
+        for name in ("translation_only_classes", "mask_depth_classes"):
+            unknown = [c for c in getattr(self, name) if c not in DYNAMIC_CLASSES]
+            if unknown:
+                raise ConfigError(f"objects.{name}: expected class names among "
+                                  f"{', '.join(sorted(DYNAMIC_CLASSES))}, got {unknown[0]!r}")
         if self.min_inliers < 3:
             raise ConfigError(f"objects.min_inliers: expected >= 3, got {self.min_inliers}")
         if not (-1.0 <= self.mask_min_ncc <= 1.0 and 0.0 < self.mask_uniqueness <= 1.0):
@@ -1010,7 +1017,7 @@ class ObjectsConfig:
                      "accel_sigma", "position_floor_m", "initial_speed_sigma", "pedestrian_initial_speed_sigma",
                      "gate_nis", "angular_accel_sigma", "rotation_floor_rad", "initial_angular_speed_sigma",
                      "register_chi2", "mask_disparity_sigma_px", "mask_centroid_sigma", "mask_gate_nis",
-                     "reanchor_gate_nis", "reanchor_other_object_m"):
+                     "reanchor_gate_nis", "reanchor_other_object_m", "mask_depth_max_m"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
         for name in ("coast_max_s", "report_coast_s", "box_velocity_window_s", "box_gate_chi2", "box_gate_size_sigma",

@@ -486,7 +486,8 @@ def test_object_creation_thresholds():
                                        ("box_velocity_window_s", -0.1), ("join_contain", 1.5),
                                        ("register_chi2", 0), ("appearance_max_distance", 1.5),
                                        ("appearance_bins", 0), ("appearance_bins", 17), ("appearance_gallery", 0),
-                                       ("translation_only_classes", "[bike]"), ("join_owner_extent_fraction", 1.5)])
+                                       ("translation_only_classes", "[bike]"), ("join_owner_extent_fraction", 1.5),
+                                       ("mask_depth_classes", "[bike]"), ("mask_depth_max_m", 0)])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 
@@ -1512,6 +1513,54 @@ def test_mask_measurement_moves_a_wrong_prediction_onto_the_mask():
     cov = np.linalg.inv(info)
     np.testing.assert_allclose(np.sqrt(cov[2, 2]), 15.0**2 / CAMERA.bf * cfg.objects.mask_disparity_sigma_px)
     assert cov[0, 0] < cov[2, 2], np.diag(cov)
+
+
+@pytest.mark.parametrize("mask_depth", [True, False])
+def test_a_pedestrian_without_stereo_depth_is_begun_at_its_mask_depth(mask_depth):
+    """A pedestrian 18 m away shows 20 keypoints of which 4 have a stereo depth (< min_new_points): with
+    objects.mask_depth_classes=pedestrian the others count at its mask's depth and the object is begun on the
+    person (its points weighted by the mask disparity's sigma); without, no object is begun."""
+    rng = np.random.default_rng(4)
+    person = Body(rng, 2001, 20, (0.6, 1.7, 0.4))
+    T = make_pose(np.eye(3), np.array([2.0, 0.5, 18.0]))
+    objects = ObjectMap()
+    trk = tracker(f"objects.mask_depth_classes=[{'pedestrian' if mask_depth else ''}]")
+    instances, depth = rendered_masks([(person, T)])
+    frame = make_frame(0, [(person, T)])
+    frame.depth[4:], frame.u_right[4:] = -1.0, -1.0
+    trk.track(frame, instances, objects, np.zeros(instances.shape, np.uint8), depth_image=depth)
+    assert len(objects.tracks) == (1 if mask_depth else 0)
+    if mask_depth:
+        (tr,) = objects.tracks.values()
+        np.testing.assert_allclose(tr.last.T_w_o[:3, 3], T[:3, 3], atol=0.3)
+        pts = objects.points.of_track(tr.track_id)
+        sigma_z = 18.0**2 / CAMERA.bf * trk.cfg.mask_disparity_sigma_px
+        assert np.count_nonzero(np.isclose(objects.points.weight[pts], sigma_z**-2)) == 16
+
+
+@pytest.mark.parametrize(("x_track", "begun"), [(1.5, False), (-4.0, True)])
+def test_no_object_is_begun_at_a_mask_depth_where_an_unseen_track_could_be(x_track, begun):
+    """A person tracked in frames 0-1 is not matched in frame 2, where a person 18 m away with 4 of 20 keypoints
+    with stereo depth stands beside its place (the boxes touch): the person is not begun at its mask's depth (it
+    could be the track's, briefly unmatched: a new id for it); with the track's place 6 m away it is."""
+    rng = np.random.default_rng(4)
+    tracked, person = Body(rng, 2001, 20, (0.6, 1.7, 0.4)), Body(rng, 2002, 20, (0.6, 1.7, 0.4))
+    T_tracked = make_pose(np.eye(3), np.array([x_track, 0.5, 18.0]))
+    T = make_pose(np.eye(3), np.array([2.0, 0.5, 18.0]))
+    objects, trk = ObjectMap(), tracker("objects.mask_depth_classes=[pedestrian]")
+    image = np.zeros((CAMERA.height, CAMERA.width), np.uint8)
+    instances, depth = rendered_masks([(tracked, T_tracked)])
+    for i in range(2):
+        trk.track(make_frame(i, [(tracked, T_tracked)]), instances, objects, image, depth_image=depth)
+    instances, depth = rendered_masks([(person, T)])
+    frame = make_frame(2, [(person, T)])
+    frame.depth[4:], frame.u_right[4:] = -1.0, -1.0
+    (box,) = instance_boxes(instances, np.array([2002]))
+    (track,) = objects.tracks.values()
+    assert trk.boxes.touches(frame, objects, track, trk.predicted_pose(track, frame.timestamp), box) != begun
+    trk.track(frame, instances, objects, image, depth_image=depth)
+    assert track.last.frame_index == 1
+    assert len(objects.tracks) == (2 if begun else 1)
 
 
 @pytest.mark.parametrize(("n_keypoints", "depth_error_m"), [(2, 0.0), (0, 0.0), (2, 6.0)])

@@ -373,7 +373,10 @@ class ObjectTracker:
             inst, tr = int(inst_ids[k]), late.get(k)
             tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
                                   reanchor=k in reidentified)
-                   if tr is not None else self._create(frame, objects, inst, points[k], boxes[k], free))
+                   if tr is not None else self._create(
+                       frame, objects, inst, points[k], boxes[k], free,
+                       masks if self._may_begin_at_mask_depth(frame, objects, active, seen, pred, inst, boxes[k])
+                       else None))
             if tid is not None:
                 seen.append(tid)
                 claimed.add(inst)
@@ -653,21 +656,52 @@ class ObjectTracker:
         return track.track_id
 
     def _create(self, frame: Frame, objects: ObjectMap, inst: int, points: tuple[np.ndarray, np.ndarray, int],
-                box: np.ndarray, free: np.ndarray) -> int | None:
+                box: np.ndarray, free: np.ndarray, masks: MaskMeasurement | None = None) -> int | None:
         """With >= min_new_points close keypoints (or, on a small instance, >= min_inliers that are >=
         small_new_fraction of its keypoints), the instance creates an object at the centroid of its points with
-        identity rotation (III-B); else None."""
+        identity rotation (III-B); else None. With `masks` (objects.mask_depth_classes), an instance short of close
+        keypoints also counts its keypoints without stereo depth, placed at its mask's depth (`_at_mask_depth`)."""
         cfg = self.cfg
         kp, X_w, n_instance = points
+        weight = self._depth_weight(frame, kp)
+        if len(kp) < cfg.min_new_points and masks is not None:
+            kp, X_w, weight = self._at_mask_depth(frame, inst, box, free, masks, kp, X_w, weight)
         enough = len(kp) >= cfg.min_inliers
         if len(kp) < cfg.min_new_points and not (enough and 0 < cfg.small_new_fraction * n_instance <= len(kp)):
             return None
         tr = objects.new_track(_instance_class(inst))
         centroid = X_w.mean(axis=0)
-        new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp], self._depth_weight(frame, kp))
+        new = objects.add_points(tr.track_id, X_w - centroid, frame.keypoints.desc[kp], weight)
         self._observe(frame, objects, tr, make_pose(np.eye(3), centroid), kp, new, inst, box)
         free[kp] = False
         return tr.track_id
+
+    def _may_begin_at_mask_depth(self, frame: Frame, objects: ObjectMap, active: list[ObjectTrack], seen: list[int],
+                                 pred: dict[int, np.ndarray], inst: int, box: np.ndarray) -> bool:
+        """Whether instance `inst` (box `box`) may begin an object at its mask's depth: its class is in
+        objects.mask_depth_classes and no unseen track of that class observed within join_max_gap_s could be there
+        (its last or predicted box touches `box`; such a track's person, briefly unmatched, would get a new id)."""
+        cls = _instance_class(inst)
+        return cls in self.cfg.mask_depth_classes and not any(
+            tr.cls == cls and tr.track_id not in seen and frame.timestamp - tr.last.timestamp <= self.cfg.join_max_gap_s
+            and self.boxes.touches(frame, objects, tr, pred[tr.track_id], box) for tr in active)
+
+    def _at_mask_depth(self, frame: Frame, inst: int, box: np.ndarray, free: np.ndarray, masks: MaskMeasurement,
+                       kp: np.ndarray, X_w: np.ndarray, weight: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The close keypoints `kp` (world points `X_w`, depth information `weight`) of instance `inst` and, when its
+        mask's depth z is found within mask_depth_max_m, its free keypoints without stereo depth placed at z (a body
+        thin against the stereo noise at its range) with the information of the mask's disparity
+        (mask_disparity_sigma_px: a wrong stereo depth seen later then fails the pose-only's disparity test instead
+        of being fused in)."""
+        z = masks.depth(inst, box)
+        if z is None or z > self.cfg.mask_depth_max_m:
+            return kp, X_w, weight
+        flat = np.flatnonzero(free & (frame.instance_id == inst) & ~(frame.depth > 0))
+        X_c = self.camera.backproject(frame.keypoints.uv[flat].astype(float), np.full(len(flat), z))
+        w_mask = (self.camera.bf / z**2 / self.cfg.mask_disparity_sigma_px) ** 2
+        return (np.r_[kp, flat], np.vstack([X_w, transform(frame.T_w_c, X_c)]),
+                np.r_[weight, np.full(len(flat), w_mask)])
 
     def _instance_points(self, frame: Frame, inst: int, free: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """The free close keypoints of instance `inst` that lie on its compact body, their world points, and
