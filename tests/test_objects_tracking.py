@@ -1515,26 +1515,28 @@ def test_mask_measurement_moves_a_wrong_prediction_onto_the_mask():
     assert cov[0, 0] < cov[2, 2], np.diag(cov)
 
 
-@pytest.mark.parametrize("mask_depth", [True, False])
-def test_a_pedestrian_without_stereo_depth_is_begun_at_its_mask_depth(mask_depth):
+@pytest.mark.parametrize(("mask_depth", "z"), [(True, 18.0), (False, 18.0), (True, 35.0)])
+def test_a_pedestrian_without_stereo_depth_is_begun_at_its_mask_depth(mask_depth, z):
     """A pedestrian 18 m away shows 20 keypoints of which 4 have a stereo depth (< min_new_points): with
     objects.mask_depth_classes=pedestrian the others count at its mask's depth and the object is begun on the
-    person (its points weighted by the mask disparity's sigma); without, no object is begun."""
+    person (its points weighted by the mask disparity's sigma); without, no object is begun, nor 35 m away (beyond
+    objects.mask_depth_max_m)."""
     rng = np.random.default_rng(4)
     person = Body(rng, 2001, 20, (0.6, 1.7, 0.4))
-    T = make_pose(np.eye(3), np.array([2.0, 0.5, 18.0]))
+    T = make_pose(np.eye(3), np.array([2.0, 0.5, z]))
+    begun = mask_depth and z <= 30.0
     objects = ObjectMap()
     trk = tracker(f"objects.mask_depth_classes=[{'pedestrian' if mask_depth else ''}]")
     instances, depth = rendered_masks([(person, T)])
     frame = make_frame(0, [(person, T)])
     frame.depth[4:], frame.u_right[4:] = -1.0, -1.0
     trk.track(frame, instances, objects, np.zeros(instances.shape, np.uint8), depth_image=depth)
-    assert len(objects.tracks) == (1 if mask_depth else 0)
-    if mask_depth:
+    assert len(objects.tracks) == (1 if begun else 0)
+    if begun:
         (tr,) = objects.tracks.values()
         np.testing.assert_allclose(tr.last.T_w_o[:3, 3], T[:3, 3], atol=0.3)
         pts = objects.points.of_track(tr.track_id)
-        sigma_z = 18.0**2 / CAMERA.bf * trk.cfg.mask_disparity_sigma_px
+        sigma_z = z**2 / CAMERA.bf * trk.cfg.mask_disparity_sigma_px
         assert np.count_nonzero(np.isclose(objects.points.weight[pts], sigma_z**-2)) == 16
 
 
