@@ -299,8 +299,12 @@ class ObjectTracker:
         while any(p is not None for p in proposals.values()):
             tid = first_claim(proposals, pred)
             best = proposals.pop(tid)
-            kp, pts = best.kp[best.inliers], best.pts[best.inliers]
             inst = int(np.searchsorted(inst_ids, best.instance_id))
+            if objects.tracks[tid].cls in cfg.mask_depth_classes and self._successor(
+                    frame, objects, [tr for tr in active if tr.track_id not in seen], pred, objects.tracks[tid],
+                    boxes[inst]) is not None:
+                continue
+            kp, pts = best.kp[best.inliers], best.pts[best.inliers]
             claimed.add(best.instance_id)
             self._fuse_points(frame, objects, best.T_w_o, kp, pts)
             self._observe(frame, objects, objects.tracks[tid], best.T_w_o, kp, pts, best.instance_id, boxes[inst])
@@ -603,19 +607,19 @@ class ObjectTracker:
             return None, None
         voted = self._vote(frame, objects, unseen, kp)
         if (voted is None or not self._in_view(frame, objects, voted[0], pred[voted[0].track_id])
-                or self._successor(frame, objects, unseen, pred, voted[0], box) is not None):
+                or (self.cfg.vote_spares_successor
+                    and self._successor(frame, objects, unseen, pred, voted[0], box) is not None)):
             return None, None
         return self._join_by_points(frame, objects, pred, inst, box, kp, X_w, free, *voted), voted[0]
 
     def _successor(self, frame: Frame, objects: ObjectMap, unseen: list[ObjectTrack], pred: dict[int, np.ndarray],
                    voted: ObjectTrack, box: np.ndarray) -> ObjectTrack | None:
-        """The track begun for the voted track's object while that one was lost, or None: a confirmed unseen track
-        (reported: >= min_output_observations observations) of its class, first observed after the voted track's
-        last observation, seen in the previous frame on a box that overlaps the instance's `box` by >= join_iou
-        (objects.vote_spares_successor). A tentative one was never reported: the old id back is no switch."""
+        """The track begun for the voted (or claiming) track's object while that one was lost, or None: a confirmed
+        unseen track (reported: >= min_output_observations observations) of its class, first observed after the voted
+        track's last observation, seen in the previous frame on a box that overlaps the instance's `box` by >=
+        join_iou (objects.vote_spares_successor; and a pose claim of a class in objects.mask_depth_classes, whose
+        successors are begun readily). A tentative one was never reported: the old id back is no switch."""
         cfg = self.cfg
-        if not cfg.vote_spares_successor:
-            return None
         return next((tr for tr in unseen
                      if tr is not voted and tr.cls == voted.cls and tr.last.frame_index == frame.index - 1
                      and len(tr.observations) >= cfg.min_output_observations
