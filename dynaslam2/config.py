@@ -431,11 +431,12 @@ class ObjectsConfig:
     min_new_points: int = 10
     # Opt-in: an instance of these classes short of min_new_points close keypoints also counts its keypoints without
     # stereo depth, placed at its mask's depth (`MaskMeasurement.depth`, found within mask_depth_max_m) and weighted
-    # by the mask disparity's sigma, unless a track of its class seen within join_max_gap_s could be there. `crossing`
-    # 40-54 / 55-69 / 70-84 / 85-99 / 100-114 / 115-129 (world 3, 150 fr, 640x480), () -> (pedestrian,): TP 74.9 /
-    # 73.9 / 74.4 / 76.0 / 78.6 / 76.0 -> 77.2 / 76.6 / 76.7 / 77.6 / 80.5 / 77.9 %, object ATE 0.238 / 0.273 / 0.282
-    # / 0.274 / 0.285 / 0.252 -> 0.251 / 0.294 / 0.296 / 0.290 / 0.304 / 0.284 m, id switches 55 -> 82 (one on an
-    # unoccluded track, s42 gt28: an old track claims the person back from the track begun while it was lost).
+    # by the mask disparity's sigma, unless a track of its class seen within join_max_gap_s could be there; and a pose
+    # claim by a track of those classes spares the track begun on its object while it was lost (`_successor`, as a
+    # vote does). `crossing` 40-54 / 55-69 / 70-84 / 85-99 / 100-114 / 115-129 (world 3, 150 fr, 640x480), () ->
+    # (pedestrian,): TP 74.9 / 73.9 / 74.4 / 76.0 / 78.6 / 76.0 -> 77.1 / 76.5 / 76.7 / 77.5 / 80.5 / 77.8 %, object
+    # ATE 0.238 / 0.273 / 0.282 / 0.274 / 0.285 / 0.252 -> 0.251 / 0.293 / 0.296 / 0.290 / 0.304 / 0.283 m, id switches
+    # 55 -> 78, none on an unoccluded track (without the claim rule one: s42 gt28, the old track took the person back).
     # Points weighted 0 instead let one wrong stereo depth (16.9 m for 31.3 m) move every other point of the person
     # 5 m through fuse_shape_only's common shift (s91 gt20, 0.24 -> 1.83 m). mask_depth_max_m: a person begun at 38 m
     # (6 m per pixel of disparity) carried its depth error into range (s97 gt26, 0.27 -> 1.14 m); not measured alone.
