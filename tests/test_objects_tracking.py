@@ -1620,6 +1620,24 @@ def test_a_keyframe_gives_a_tracked_object_the_points_it_shows(kf_points_all_obj
         assert n_added == 0
 
 
+def lost_and_begun_again(trk: ObjectTracker, objects: ObjectMap, body: Body, poses: list[np.ndarray], hidden: range,
+                         rng: np.random.Generator) -> tuple[int, int]:
+    """Track `body` at `poses` in the frames before `hidden`, hide it in `hidden` (beyond join_max_gap_s), show it
+    with a new appearance for three frames (a new track, confirmed) and give it back its old appearance: (the old
+    track id, the new one)."""
+    old = track_alone(trk, objects, body, poses[:hidden.start]).track_id
+    for i in hidden:
+        trk.track(make_frame(i, []), None, objects)
+    assert (hidden.stop - 1) * DT - (hidden.start - 1) * DT > trk.cfg.join_max_gap_s
+    desc = body.desc.copy()
+    body.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
+    for i in range(hidden.stop, hidden.stop + 3):
+        (e,) = trk.track(make_frame(i, [(body, poses[i])]), None, objects).estimates
+    assert e.track_id != old and old in objects.tracks and len(objects.tracks[e.track_id].observations) == 3
+    body.desc = desc
+    return old, e.track_id
+
+
 @pytest.mark.parametrize("spare", [True, False])
 def test_a_vote_does_not_take_an_object_from_the_track_begun_for_it_while_its_old_one_was_lost(spare):
     """A car tracked at 15 m stops while hidden for 1 s (beyond join_max_gap_s): its old track's prediction runs
@@ -1631,17 +1649,7 @@ def test_a_vote_does_not_take_an_object_from_the_track_begun_for_it_while_its_ol
     car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
     T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * min(i, 4), 0.8, 15.0])) for i in range(20)]
     objects, trk = ObjectMap(), tracker(f"objects.vote_spares_successor={str(spare).lower()}")
-    old = track_alone(trk, objects, car, T_car[:5]).track_id
-    for i in range(5, 15):
-        trk.track(make_frame(i, []), None, objects)
-    assert 14 * DT - 4 * DT > trk.cfg.join_max_gap_s
-    desc = car.desc.copy()
-    car.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
-    for i in range(15, 18):
-        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
-    young = e.track_id
-    assert young != old and old in objects.tracks and len(objects.tracks[young].observations) == 3
-    car.desc = desc
+    old, young = lost_and_begun_again(trk, objects, car, T_car, range(5, 15), rng)
     (e,) = trk.track(make_frame(18, [(car, T_car[18])]), None, objects).estimates
     assert e.track_id == (young if spare else old)
 
@@ -1747,16 +1755,6 @@ def test_a_pose_claim_spares_the_track_begun_for_a_person_at_mask_depth(mask_dep
     T = [make_pose(np.eye(3), np.array([-2.0 + 0.14 * i, 0.5, 12.0])) for i in range(21)]
     objects = ObjectMap()
     trk = tracker(f"objects.mask_depth_classes=[{'pedestrian' if mask_depth else ''}]")
-    old = track_alone(trk, objects, person, T[:5]).track_id
-    for i in range(5, 17):
-        trk.track(make_frame(i, []), None, objects)
-    assert 16 * DT - 4 * DT > trk.cfg.join_max_gap_s
-    desc = person.desc.copy()
-    person.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
-    for i in range(17, 20):
-        (e,) = trk.track(make_frame(i, [(person, T[i])]), None, objects).estimates
-    young = e.track_id
-    assert young != old and old in objects.tracks and len(objects.tracks[young].observations) == 3
-    person.desc = desc
+    old, young = lost_and_begun_again(trk, objects, person, T, range(5, 17), rng)
     (e,) = trk.track(make_frame(20, [(person, T[20])]), None, objects).estimates
     assert e.track_id == (young if mask_depth else old)
