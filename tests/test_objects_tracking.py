@@ -1524,9 +1524,9 @@ def test_a_pedestrian_without_stereo_depth_is_begun_at_its_mask_depth(mask_depth
     rng = np.random.default_rng(4)
     person = Body(rng, 2001, 20, (0.6, 1.7, 0.4))
     T = make_pose(np.eye(3), np.array([2.0, 0.5, z]))
-    begun = mask_depth and z <= 30.0
     objects = ObjectMap()
     trk = tracker(f"objects.mask_depth_classes=[{'pedestrian' if mask_depth else ''}]")
+    begun = mask_depth and z <= trk.cfg.mask_depth_max_m
     instances, depth = rendered_masks([(person, T)])
     frame = make_frame(0, [(person, T)])
     frame.depth[4:], frame.u_right[4:] = -1.0, -1.0
