@@ -1043,6 +1043,29 @@ def test_predicted_box_follows_an_approaching_object_out_of_the_image():
     assert e4.track_id == e.track_id
 
 
+def test_a_track_that_has_left_the_image_joins_no_instance_at_the_border():
+    """A person walks out by the right image border; the next frame another person's sliver (3 keypoints: it
+    coasts) stands where the first one was last seen. The first track's moved box lies wholly outside the image:
+    it has left the view and joins nothing (crossing s90 f135: its last box took the sliver of the next person
+    leaving there, an id switch)."""
+    rng = np.random.default_rng(23)
+    a = Body(rng, 2001, 40, (0.6, 1.7, 0.6))
+    sliver = Body(rng, 2002, 0, (1.0, 1.0, 1.0))
+    sliver.X_b = np.array([[-0.15, -0.8, 0.0], [0.1, 0.0, 0.0], [0.0, 0.8, 0.0]])
+    sliver.desc = rng.integers(0, 256, (3, 32)).astype(np.uint8)
+    objects, trk = ObjectMap(), tracker("objects.filter=false")
+    for i in range(4):  # the right border is 5.2 m to the right at 10 m
+        (e,) = trk.track(make_frame(i, [(a, make_pose(np.eye(3), np.array([3.6 + 0.5 * i, 0.5, 10.0])))]), None,
+                         objects).estimates
+    tr = objects.tracks[e.track_id]
+    frame = make_frame(4, [(sliver, make_pose(np.eye(3), np.array([5.0, 0.5, 10.0])))])
+    uv = frame.keypoints.uv
+    assert box_iou(np.r_[uv.min(axis=0), uv.max(axis=0)][None], np.asarray(tr.last.box2d)[None])[0, 0] > 0.5
+    assert trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects) is None
+    trk.track(frame, None, objects)
+    assert tr.last.frame_index == 3 and list(objects.tracks) == [e.track_id]
+
+
 def test_ba_write_back_keeps_each_object_frame_on_the_body():
     """After the BA with objects, each object's points keep their mean position in the object frame: the
     frame is translated back by the BA's common shift, the world points stay, and the constant-velocity

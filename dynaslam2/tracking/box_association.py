@@ -102,8 +102,10 @@ class BoxAssociation:
         pose and this camera, and scales by the median ratio of their depths (an approaching object's
         box grows; a turn that changes its outline does not count). With fewer than 3 of the points in
         front of both cameras the object-frame origin moves it; the last box as it was when neither can.
-        None without a last box, or when the points and the origin are all predicted behind this camera
-        (a passed object: its last box as it was would take the instance of the object now there)."""
+        None without a last box, when the points and the origin are all predicted behind this camera
+        (a passed object: its last box as it was would take the instance of the object now there), or when the
+        moved box lies wholly outside the image (an object that has left the view: its last box, a sliver at the
+        border, took the sliver of the next object leaving there, crossing s90 f135)."""
         last = track.last
         if last.box2d is None:
             return None
@@ -119,7 +121,10 @@ class BoxAssociation:
         if motion is not None:
             uv_last, uv_pred, scale = motion
             box = np.r_[uv_pred, uv_pred] + scale * (box - np.r_[uv_last, uv_last])
-        return np.clip(box, 0.0, [self.camera.width - 1, self.camera.height - 1] * 2)
+        far_corner = np.array([self.camera.width - 1, self.camera.height - 1], dtype=float)
+        if np.any(box[:2] > far_corner) or np.any(box[2:] < 0.0):
+            return None
+        return np.clip(box, 0.0, np.tile(far_corner, 2))
 
     def image_extrapolated_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray | None:
         """The last 2D box moved on to `timestamp` at the image velocity of the track's boxes since its observation
