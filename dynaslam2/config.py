@@ -886,6 +886,9 @@ class ObjectsConfig:
     # switch; the ego motion is unchanged (output only). Not the default while crossing 70-84 crosses 0.3 m and
     # `crossing` stays below 80 % either way.
     report_coast_s: float = 0.0
+    # report_coast_s for a pedestrian's track: a person walks on at its constant-velocity prediction (a vehicle turns
+    # and brakes).
+    pedestrian_report_coast_s: float = 0.0
     # Object-point culling: seen in view this often with a found ratio below cull_found_ratio.
     cull_min_visible: int = 5
     cull_found_ratio: float = 0.25
@@ -1027,9 +1030,9 @@ class ObjectsConfig:
                      "reanchor_gate_nis", "reanchor_other_object_m", "mask_depth_max_m"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
-        for name in ("coast_max_s", "report_coast_s", "box_velocity_window_s", "box_gate_chi2", "box_gate_size_sigma",
-                     "extent_margin_m", "pose_disparity_weight", "n_features", "features_max_level",
-                     "densify_features", "densify_max_level"):
+        for name in ("coast_max_s", "report_coast_s", "pedestrian_report_coast_s", "box_velocity_window_s",
+                     "box_gate_chi2", "box_gate_size_sigma", "extent_margin_m", "pose_disparity_weight", "n_features",
+                     "features_max_level", "densify_features", "densify_max_level"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"objects.{name}: expected >= 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",

@@ -190,8 +190,7 @@ class System:
             timing["tracking"] = (time.perf_counter() - t_track) * 1e3 - timing["objects"]
         self.last_frame = frame
         self.n_frames += 1
-        objects = (self.object_tracker.estimates(self.objects, frame.index, self.config.objects.min_output_observations,
-                                                   self.config.objects.report_coast_s)
+        objects = (self.object_tracker.estimates(self.objects, frame.index, self.config.objects.min_output_observations)
                    if self.object_tracker is not None and ok else [])
         timing["total"] = (time.perf_counter() - t_start) * 1e3
         return FrameEstimate(

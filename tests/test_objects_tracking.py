@@ -566,6 +566,28 @@ def test_track_goes_on_at_its_prediction_while_its_instance_has_too_few_points(r
         np.testing.assert_allclose(obs.T_w_o, T_car[obs.frame_index] @ T_off, atol=5e-3)
 
 
+@pytest.mark.parametrize(("report_coast_s", "pedestrian_report_coast_s", "reported"),
+                         [(0.0, 0.3, {"pedestrian"}), (0.3, 0.0, {"car"}), (0.0, 0.0, set())])
+def test_a_pedestrians_coasted_track_is_reported_within_its_own_window(report_coast_s, pedestrian_report_coast_s,
+                                                                        reported):
+    """A car and a person both coast for two frames (4 keypoints each): each coasted observation is reported by its
+    class's window, objects.pedestrian_report_coast_s for the person's track and report_coast_s for the car's."""
+    rng = np.random.default_rng(6)
+    car, person = Body(rng, 1001, 80, (4.0, 1.5, 1.5)), Body(rng, 2001, 60, (0.5, 1.7, 0.4))
+    few = {body.inst: body.part(np.arange(4)) for body in (car, person)}
+    T_car = [make_pose(np.eye(3), np.array([-4.0 + 0.5 * i, 0.8, 15.0])) for i in range(8)]
+    T_person = [make_pose(np.eye(3), np.array([3.0 - 0.15 * i, 0.5, 12.0])) for i in range(8)]
+    objects, trk = ObjectMap(), tracker("objects.filter=false", f"objects.report_coast_s={report_coast_s}",
+                                        f"objects.pedestrian_report_coast_s={pedestrian_report_coast_s}")
+    classes = []
+    for i in range(8):
+        bodies = [(few[b.inst] if i in (5, 6) else b, T[i]) for b, T in ((car, T_car), (person, T_person))]
+        classes.append({e.cls for e in trk.track(make_frame(i, bodies), None, objects).estimates})
+    assert len(objects.tracks) == 2
+    assert all(not o.measured for tr in objects.tracks.values() for o in tr.observations if o.frame_index in (5, 6))
+    assert classes == [{"car", "pedestrian"}] * 5 + [reported] * 2 + [{"car", "pedestrian"}]
+
+
 def noisy_disparity(frame: Frame, rng: np.random.Generator, sigma_px: float) -> Frame:
     """`frame` with Gaussian disparity noise on every stereo keypoint (right u and depth consistent)."""
     disparity = CAMERA.bf / frame.depth + rng.normal(0.0, sigma_px, len(frame.depth))

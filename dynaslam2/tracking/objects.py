@@ -863,20 +863,21 @@ class ObjectTracker:
             P.n_found[pts] < self.cfg.cull_found_ratio * P.n_visible[pts])
         P.alive[pts[bad]] = False
 
-    @staticmethod
-    def estimates(objects: ObjectMap, frame_index: int, min_observations: int = 1,
-                  report_coast_s: float = 0.0) -> list[ObjectEstimate]:
+    def estimates(self, objects: ObjectMap, frame_index: int, min_observations: int = 1) -> list[ObjectEstimate]:
         """Output of the objects observed at `frame_index` (world-frame velocities), by track id: those whose
         track had at least `min_observations` observations by then (a confirmed track); a coasted observation (its
         instance's box alone, without points or mask measurement: its pose is the prediction, `coast_max_s`) only
-        within `report_coast_s` of the track's last observation with a measurement or points."""
+        within objects.report_coast_s (a pedestrian's: pedestrian_report_coast_s) of the track's last observation
+        with a measurement or points."""
+        cfg = self.cfg
         out = []
         for tid in sorted(objects.tracks):
             tr = objects.tracks[tid]
             obs = tr.at_frame(frame_index)
+            window_s = cfg.pedestrian_report_coast_s if tr.cls == "pedestrian" else cfg.report_coast_s
             if (obs is None or len(tr.observations) < min_observations
                     or tr.observations[min_observations - 1].frame_index > frame_index
-                    or (_coasted(obs) and not _seen_within(tr, obs, report_coast_s))):
+                    or (_coasted(obs) and not _seen_within(tr, obs, window_s))):
                 continue
             v_w, w_w = velocity_to_world(obs.T_w_o, obs.v_o, obs.w_o)
             out.append(ObjectEstimate(track_id=tid, cls=tr.cls, T_w_o=obs.T_w_o.copy(), v_w=v_w, w_w=w_w,
@@ -894,7 +895,7 @@ class ObjectTracker:
             if len(tr.observations) > 1 and n_features >= self.cfg.weak_min_features \
                     and n_tracked < min(self.cfg.weak_max_tracked, self.cfg.weak_tracked_ratio * n_features):
                 weak.append(tid)
-        return ObjectFrameResult(self.estimates(objects, frame.index, report_coast_s=self.cfg.report_coast_s),
+        return ObjectFrameResult(self.estimates(objects, frame.index),
                                  n_matches, weak)
 
     # --------------------------------------------------------------- keyframes
