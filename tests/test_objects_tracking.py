@@ -1614,12 +1614,13 @@ def test_no_object_is_begun_at_a_mask_depth_where_an_unseen_track_could_be(x_tra
 def test_a_coasting_track_is_measured_by_its_mask(n_keypoints, depth_error_m):
     """For two frames a walking pedestrian's instance carries 2 keypoints or none (too few for a pose): its mask
     measures the track (objects.mask_measurement), which is reported there as measured, on the person; a mask depth
-    6 m off fails the validation gate (mask_gate_nis): the track coasts unreported, as without the mask."""
+    6 m off fails the validation gate (mask_gate_nis): the track coasts, unreported with the pedestrians' coast
+    window off (objects.pedestrian_report_coast_s=0), as without the mask."""
     rng = np.random.default_rng(6)
     person = Body(rng, 2001, 40, (0.6, 1.7, 0.5))
     few = person.part(np.arange(n_keypoints))
     T = [make_pose(np.eye(3), np.array([-1.0 + 0.14 * i, 0.5, 12.0])) for i in range(8)]
-    objects, trk = ObjectMap(), tracker()
+    objects, trk = ObjectMap(), tracker("objects.pedestrian_report_coast_s=0")
     image = np.zeros((CAMERA.height, CAMERA.width), np.uint8)
     ids = []
     for i in range(8):
