@@ -889,7 +889,7 @@ class ObjectsConfig:
     report_coast_s: float = 0.0
     # report_coast_s for a pedestrian's track: a person walks on at its constant-velocity prediction (a vehicle turns
     # and brakes: crossing s40 gt5's car coasted 4 m off in 1.5 s). Offline on crossing 40-54 with mask_depth_classes
-    # (the same run's coasted observations reported or not, `/work/diag/policy.py`), TP / object ATE: none 77.1 % /
+    # (the same run's coasted observations reported or not), TP / object ATE: none 77.1 % /
     # 0.251 m; people within 0.3 / 0.5 / 1 / 2 s 79.4 / 79.7 / 80.0 / 80.2 % at 0.255-0.257 m; every class within 0.3
     # s 81.5 % at 0.268 m, within 1 s 83.1 % at 0.283 m. Measured, 0 -> 1 s (with mask_depth_classes, before the
     # left-the-view rule of `BoxAssociation.predicted_box`), crossing 40-54 / 55-69 / 70-84 / 85-99 / 100-114 /

@@ -895,8 +895,7 @@ class ObjectTracker:
             if len(tr.observations) > 1 and n_features >= self.cfg.weak_min_features \
                     and n_tracked < min(self.cfg.weak_max_tracked, self.cfg.weak_tracked_ratio * n_features):
                 weak.append(tid)
-        return ObjectFrameResult(self.estimates(objects, frame.index),
-                                 n_matches, weak)
+        return ObjectFrameResult(self.estimates(objects, frame.index), n_matches, weak)
 
     # --------------------------------------------------------------- keyframes
     def on_keyframe(self, frame: Frame, kf_id: int, objects: ObjectMap, weak: list[int]) -> None:
