@@ -1674,7 +1674,7 @@ def lost_and_begun_again(trk: ObjectTracker, objects: ObjectMap, body: Body, pos
     old = track_alone(trk, objects, body, poses[:hidden.start]).track_id
     for i in hidden:
         trk.track(make_frame(i, []), None, objects)
-    assert (hidden.stop - 1) * DT - (hidden.start - 1) * DT > trk.cfg.join_max_gap_s
+    assert len(hidden) * DT > trk.cfg.join_max_gap_s
     desc = body.desc.copy()
     body.desc = rng.integers(0, 256, desc.shape).astype(np.uint8)
     for i in range(hidden.stop, hidden.stop + 3):
