@@ -1088,6 +1088,29 @@ def test_a_track_that_has_left_the_image_joins_no_instance_at_the_border():
     assert tr.last.frame_index == 3 and list(objects.tracks) == [e.track_id]
 
 
+def test_a_car_whose_last_seen_part_has_left_the_image_keeps_its_track_by_the_part_still_in_view():
+    """A car drives out by the left image border. Last seen by its front (the rest hidden), it is unseen for three
+    frames; then only its rear shows, with new keypoints (no point votes). Its last box, moved, lies wholly outside
+    the image, but its predicted 3D extent does not: the car is still in view, and its extent joins the rear's
+    instance to its track (crossing s77 f37, s99 f32: a passing car's track lost, a new one begun on its rear)."""
+    rng = np.random.default_rng(31)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    front, rear = np.flatnonzero(car.X_b[:, 0] < -1.2), np.flatnonzero(car.X_b[:, 0] > 0.8)
+    T_car = [make_pose(np.eye(3), np.array([-1.0 - 0.5 * i, 0.5, 10.0])) for i in range(8)]  # the border: x -5.2 m
+    objects, trk = ObjectMap(), tracker("objects.filter=false")
+    for i in range(4):
+        body = car.part(front) if i == 3 else car
+        (e,) = trk.track(make_frame(i, [(body, T_car[i])]), None, objects).estimates
+    tr = objects.tracks[e.track_id]
+    assert tr.last.frame_index == 3 and tr.last.measured
+    frame = make_frame(7, [(car.part(rear, rng=rng), T_car[7])])
+    assert len(frame.keypoints) >= trk.cfg.min_inliers
+    box = trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    assert box is not None and box[0] == box[2] == 0.0  # the moved last box, clipped to the left border
+    (e7,) = trk.track(frame, None, objects).estimates
+    assert e7.track_id == e.track_id and list(objects.tracks) == [e.track_id]
+
+
 def test_ba_write_back_keeps_each_object_frame_on_the_body():
     """After the BA with objects, each object's points keep their mean position in the object frame: the
     frame is translated back by the BA's common shift, the world points stay, and the constant-velocity

@@ -104,8 +104,13 @@ class BoxAssociation:
         front of both cameras the object-frame origin moves it; the last box as it was when neither can.
         None without a last box, when the points and the origin are all predicted behind this camera
         (a passed object: its last box as it was would take the instance of the object now there), or when the
-        moved box lies wholly outside the image (an object that has left the view: its last box, a sliver at the
-        border, took the sliver of the next object leaving there, crossing s90 f135)."""
+        moved box and the object's predicted 3D extent (`_extent_box`) lie wholly outside the image (an object that
+        has left the view: its last box, a sliver at the border, took the sliver of the next object leaving there,
+        crossing s90 f135). A vehicle's moved box outside the image while its extent is not (the part last seen has
+        left, the rest is still in view: crossing s77 f37, a car passing at the left border) is clipped to the
+        border: the track stays a candidate, which its extent ("extent" stage of `assign`) may join. Not a person's:
+        no stage joins by a person's extent, and its last box took the sliver of the next person leaving there
+        (crossing s97 f128)."""
         last = track.last
         if last.box2d is None:
             return None
@@ -121,10 +126,32 @@ class BoxAssociation:
         if motion is not None:
             uv_last, uv_pred, scale = motion
             box = np.r_[uv_pred, uv_pred] + scale * (box - np.r_[uv_last, uv_last])
-        far_corner = np.array([self.camera.width - 1, self.camera.height - 1], dtype=float)
-        if np.any(box[:2] > far_corner) or np.any(box[2:] < 0.0):
+        if not self._in_image(box):
+            extent = self._extent_box(objects, track, frame, T_w_o_pred) if track.cls in VEHICLE_CLASSES else None
+            if extent is None or not self._in_image(extent):
+                return None
+        return np.clip(box, 0.0, np.array([self.camera.width - 1, self.camera.height - 1] * 2, dtype=float))
+
+    def _in_image(self, box: np.ndarray) -> bool:
+        """Whether `box` (u_min, v_min, u_max, v_max) overlaps the image."""
+        return bool(np.all(box[:2] <= [self.camera.width - 1, self.camera.height - 1]) and np.all(box[2:] >= 0.0))
+
+    def _extent_box(self, objects: ObjectMap, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray
+                    ) -> np.ndarray | None:
+        """The image box of the track's 3D extent (the 5th to 95th percentile per object-frame axis of its points, as
+        `extent_fraction` without the margin) at the predicted pose: of its corners in front of the camera; None
+        without points or with every corner behind the camera."""
+        X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
+        if not len(X_o):
             return None
-        return np.clip(box, 0.0, np.tile(far_corner, 2))
+        lo, hi = np.percentile(X_o, 5, axis=0), np.percentile(X_o, 95, axis=0)
+        corners = np.stack(np.meshgrid(*zip(lo, hi), indexing="ij"), axis=-1).reshape(-1, 3)
+        X_c = transform(frame.T_c_w @ T_w_o_pred, corners)
+        X_c = X_c[X_c[:, 2] > 1e-3]
+        if not len(X_c):
+            return None
+        uv = self.camera.project(X_c)
+        return np.r_[uv.min(axis=0), uv.max(axis=0)]
 
     def image_extrapolated_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray | None:
         """The last 2D box moved on to `timestamp` at the image velocity of the track's boxes since its observation
