@@ -487,7 +487,8 @@ def test_object_creation_thresholds():
                                        ("register_chi2", 0), ("appearance_max_distance", 1.5),
                                        ("appearance_bins", 0), ("appearance_bins", 17), ("appearance_gallery", 0),
                                        ("translation_only_classes", "[bike]"), ("join_owner_extent_fraction", 1.5),
-                                       ("mask_depth_classes", "[bike]"), ("mask_depth_max_m", 0)])
+                                       ("mask_depth_classes", "[bike]"), ("mask_depth_max_m", 0),
+                                       ("pedestrian_coast_max_s", -0.1)])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 
@@ -586,6 +587,25 @@ def test_a_pedestrians_coasted_track_is_reported_within_its_own_window(report_co
     assert len(objects.tracks) == 2
     assert all(not o.measured for tr in objects.tracks.values() for o in tr.observations if o.frame_index in (5, 6))
     assert classes == [{"car", "pedestrian"}] * 5 + [reported] * 2 + [{"car", "pedestrian"}]
+
+
+@pytest.mark.parametrize(("pedestrian_coast_max_s", "kept"), [(0.8, True), (0.3, False)])
+def test_a_person_reappearing_with_too_few_keypoints_keeps_its_track_within_its_coast_window(pedestrian_coast_max_s,
+                                                                                             kept):
+    """A person walking at 1.5 m/s is hidden for 0.4 s and comes out with 4 keypoints only (too few for a pose or a
+    vote: the instance coasts). Its box overlaps the track's moved box: it keeps the track within
+    objects.pedestrian_coast_max_s of the last observation (crossing s74 gt22: 0.5 s behind a car, then a sliver
+    whose box overlapped the moved one by 0.6), and joins nothing beyond it."""
+    rng = np.random.default_rng(7)
+    person = Body(rng, 2001, 60, (0.5, 1.7, 0.4))
+    T_person = [make_pose(np.eye(3), np.array([-2.0 + 0.15 * i, 0.5, 12.0])) for i in range(9)]
+    objects, trk = ObjectMap(), tracker("objects.filter=false", "objects.pedestrian_report_coast_s=0",
+                                        f"objects.pedestrian_coast_max_s={pedestrian_coast_max_s}")
+    e = track_alone(trk, objects, person, T_person[:4])
+    tr = objects.tracks[e.track_id]
+    trk.track(make_frame(8, [(person.part(np.arange(4)), T_person[8])]), None, objects)
+    assert list(objects.tracks) == [e.track_id]
+    assert tr.last.frame_index == (8 if kept else 3) and tr.last.measured != kept  # coasted: not measured
 
 
 def noisy_disparity(frame: Frame, rng: np.random.Generator, sigma_px: float) -> Frame:

@@ -19,8 +19,8 @@ association, the frame's instances assigned jointly; failing that, their box cen
 Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_chi2`, or, for a vehicle,
 their stereo points lie inside its predicted 3D extent, `objects.extent_min_fraction`; all in
 `box_association`). Then instances with too few close keypoints keep, by their box alone, a track seen within
-`objects.coast_max_s` (coasting: its id kept, its position measured by the instance's mask, `mask_measurement`, or
-else its predicted pose, not reported unless `objects.report_coast_s`). Last, an instance still unclaimed joins a
+`objects.coast_max_s` (a person's: `pedestrian_coast_max_s`; coasting: its id kept, its position measured by the
+instance's mask, `mask_measurement`, or else its predicted pose, reported within `objects.report_coast_s`). Last, an instance still unclaimed joins a
 young pedestrian track (no velocity yet) within the gate of its last box. No claim, vote or box join gives a
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
 `objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
@@ -326,11 +326,13 @@ class ObjectTracker:
         def assign(tracks: list[ObjectTrack], ks: list[int], max_gap_s: float, stages: tuple[str, ...]
                    ) -> dict[int, ObjectTrack | None]:
             """The track each open instance of `ks` joins by `BoxAssociation.assign`; an instance without enough
-            keypoints coasts within coast_max_s."""
+            keypoints coasts within coast_max_s (a person's: pedestrian_coast_max_s)."""
+            classes = [_instance_class(int(inst_ids[k])) for k in ks]
             return dict(zip(ks, self.boxes.assign(
-                frame, objects, tracks, pred, boxes[ks], [_instance_class(int(inst_ids[k])) for k in ks],
+                frame, objects, tracks, pred, boxes[ks], classes,
                 [points[k][1] for k in ks], None if looks is None else {tid: d[ks] for tid, d in looks.items()},
-                np.array([max_gap_s if enough[k] else cfg.coast_max_s for k in ks]),
+                np.array([max_gap_s if enough[k] else cfg.pedestrian_coast_max_s if cls == "pedestrian"
+                          else cfg.coast_max_s for k, cls in zip(ks, classes)]),
                 np.array([not enough[k] for k in ks], dtype=bool), stages)))
         voted = {}
         for k in (k for k in open_k if enough[k]):  # a vote needs min_inliers close keypoints (`_join_by_vote`)
