@@ -1050,9 +1050,10 @@ class ObjectsConfig:
                      "reanchor_gate_nis", "reanchor_other_object_m", "mask_depth_max_m"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"objects.{name}: expected > 0, got {getattr(self, name)}")
-        for name in ("coast_max_s", "pedestrian_coast_max_s", "report_coast_s", "pedestrian_report_coast_s", "box_velocity_window_s",
-                     "box_gate_chi2", "box_gate_size_sigma", "extent_margin_m", "pose_disparity_weight", "n_features",
-                     "features_max_level", "densify_features", "densify_max_level"):
+        for name in ("coast_max_s", "pedestrian_coast_max_s", "report_coast_s", "pedestrian_report_coast_s",
+                     "box_velocity_window_s", "box_gate_chi2", "box_gate_size_sigma", "extent_margin_m",
+                     "pose_disparity_weight", "n_features", "features_max_level", "densify_features",
+                     "densify_max_level"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"objects.{name}: expected >= 0, got {getattr(self, name)}")
         for name in ("min_overlap_iou", "join_ratio", "join_iou", "cull_found_ratio", "bf_nn_ratio",

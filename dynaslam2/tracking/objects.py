@@ -20,8 +20,9 @@ Mahalanobis gate of a velocity-known object's predicted box, `objects.box_gate_c
 their stereo points lie inside its predicted 3D extent, `objects.extent_min_fraction`; all in
 `box_association`). Then instances with too few close keypoints keep, by their box alone, a track seen within
 `objects.coast_max_s` (a person's: `pedestrian_coast_max_s`; coasting: its id kept, its position measured by the
-instance's mask, `mask_measurement`, or else its predicted pose, reported within `objects.report_coast_s`). Last, an instance still unclaimed joins a
-young pedestrian track (no velocity yet) within the gate of its last box. No claim, vote or box join gives a
+instance's mask, `mask_measurement`, or else its predicted pose, reported within `objects.report_coast_s`, a
+person's within `pedestrian_report_coast_s`). Last, an instance still unclaimed joins a young pedestrian track (no
+velocity yet) within the gate of its last box. No claim, vote or box join gives a
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
 `objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
 its colours and the gate (`objects.appearance_reid_distance`). A tentative track (fewer than
