@@ -795,11 +795,12 @@ class ObjectsConfig:
     # against the track's moved box keeps the track (crossing s74 gt22: hidden 0.5 s, then a sliver whose box
     # overlapped the moved one by 0.6 began a new track); the mask measurement (mask_depth_classes) then measures it.
     # 0.3 -> 0.8 s (join_max_gap_s, the window of an instance with keypoints), with the left-the-view rule judged by
-    # the 3D extent for every class (`BoxAssociation.predicted_box`; people's now by the box), crossing 40-54 / 55-69 / 70-84 / 85-99 / 100-114 / 115-129: TP
-    # 80.3 / 80.0 / 79.7 / 79.9 / 83.4 / 81.0 -> 80.7 / 80.0 / 80.4 / 80.4 / 83.9 / 81.6 %, id switches 21 / 20 / 17 /
-    # 12 / 11 / 20 -> 19 / 19 / 13 / 12 / 11 / 15, object ATE 0.260 / 0.300 / 0.309 / 0.300 / 0.315 / 0.290 -> 0.267 /
-    # 0.285 / 0.313 / 0.308 / 0.324 / 0.300 m (more coasted people reported, pedestrian_report_coast_s), short gaps
-    # lost 8 of 684 -> 8 of 698; over the 90 seeds TP 80.7 -> 81.2 %, object ATE 0.296 -> 0.300 m.
+    # the 3D extent for every class (`BoxAssociation.predicted_box`; people's now by the box), crossing 40-54 / 55-69
+    # / 70-84 / 85-99 / 100-114 / 115-129: TP 80.3 / 80.0 / 79.7 / 79.9 / 83.4 / 81.0 -> 80.7 / 80.0 / 80.4 / 80.4 /
+    # 83.9 / 81.6 %, id switches 21 / 20 / 17 / 12 / 11 / 20 -> 19 / 19 / 13 / 12 / 11 / 15, object ATE 0.260 / 0.300
+    # / 0.309 / 0.300 / 0.315 / 0.290 -> 0.267 / 0.285 / 0.313 / 0.308 / 0.324 / 0.300 m (more coasted people
+    # reported, pedestrian_report_coast_s), short gaps lost 8 of 684 -> 8 of 698; over the 90 seeds TP 80.7 -> 81.2
+    # %, object ATE 0.296 -> 0.300 m. With the rule as it is, every group: README.
     pedestrian_coast_max_s: float = 0.8
     # Not in the paper: a coasting instance (too few close keypoints) that keeps a track by its box measures the
     # track's position from its mask alone (`tracking.mask_measurement`): the mask's disparity as a whole
