@@ -104,13 +104,13 @@ class BoxAssociation:
         front of both cameras the object-frame origin moves it; the last box as it was when neither can.
         None without a last box, when the points and the origin are all predicted behind this camera
         (a passed object: its last box as it was would take the instance of the object now there), or when the
-        moved box and the object's predicted 3D extent (`_extent_box`) lie wholly outside the image (an object that
+        moved box (and a vehicle's predicted 3D extent, `_extent_box`) lies wholly outside the image (an object that
         has left the view: its last box, a sliver at the border, took the sliver of the next object leaving there,
         crossing s90 f135). A vehicle's moved box outside the image while its extent is not (the part last seen has
         left, the rest is still in view: crossing s77 f37, a car passing at the left border) is clipped to the
-        border: the track stays a candidate, which its extent ("extent" stage of `assign`) may join. Not a person's:
-        no stage joins by a person's extent, and its last box took the sliver of the next person leaving there
-        (crossing s97 f128)."""
+        border: the track stays a candidate, which its extent ("extent" stage of `assign`) or its last box may join.
+        Not a person's: no stage joins by a person's extent, and its last box took the sliver of the next person
+        leaving there (crossing s97 f128)."""
         last = track.last
         if last.box2d is None:
             return None
