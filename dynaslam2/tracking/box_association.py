@@ -60,6 +60,13 @@ def implausible_jump(track: ObjectTrack, timestamp: float, p_w: np.ndarray, cfg:
                 and gated(track, timestamp - track.last.timestamp, p_w, lambda: exact, cfg, nis=cfg.reanchor_gate_nis))
 
 
+def _extent(objects: ObjectMap, track: ObjectTrack) -> tuple[np.ndarray, np.ndarray] | None:
+    """The track's 3D extent in its object frame: the 5th and 95th percentile per axis of its points (None without
+    points)."""
+    X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
+    return (np.percentile(X_o, 5, axis=0), np.percentile(X_o, 95, axis=0)) if len(X_o) else None
+
+
 def instance_boxes(instances: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """(K, 4) boxes (left, top, right, bottom) in px of the masks of instance ids `ids` (NaN if absent)."""
     boxes = np.full((len(ids), 4), np.nan)
@@ -138,14 +145,12 @@ class BoxAssociation:
 
     def _extent_box(self, objects: ObjectMap, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray
                     ) -> np.ndarray | None:
-        """The image box of the track's 3D extent (the 5th to 95th percentile per object-frame axis of its points, as
-        `extent_fraction` without the margin) at the predicted pose: of its corners in front of the camera; None
-        without points or with every corner behind the camera."""
-        X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
-        if not len(X_o):
+        """The image box of the track's 3D extent (`_extent`, without the margin) at the predicted pose: of its
+        corners in front of the camera; None without points or with every corner behind the camera."""
+        extent = _extent(objects, track)
+        if extent is None:
             return None
-        lo, hi = np.percentile(X_o, 5, axis=0), np.percentile(X_o, 95, axis=0)
-        corners = np.stack(np.meshgrid(*zip(lo, hi), indexing="ij"), axis=-1).reshape(-1, 3)
+        corners = np.stack(np.meshgrid(*zip(*extent), indexing="ij"), axis=-1).reshape(-1, 3)
         X_c = transform(frame.T_c_w @ T_w_o_pred, corners)
         X_c = X_c[X_c[:, 2] > 1e-3]
         if not len(X_c):
@@ -359,13 +364,12 @@ class BoxAssociation:
 
     def extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
                         X_w: list[np.ndarray]) -> np.ndarray:
-        """Fraction of each instance's world points `X_w` inside the track's 3D extent at its predicted pose: the
-        5th to 95th percentile per object-frame axis of its points, grown by extent_margin_m (0 without points)."""
-        X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
-        if not len(X_o):
+        """Fraction of each instance's world points `X_w` inside the track's 3D extent (`_extent`) at its predicted
+        pose, grown by extent_margin_m (0 without points)."""
+        extent = _extent(objects, track)
+        if extent is None:
             return np.zeros(len(X_w))
-        margin = self.cfg.extent_margin_m
-        lo, hi = np.percentile(X_o, 5, axis=0) - margin, np.percentile(X_o, 95, axis=0) + margin
+        lo, hi = extent[0] - self.cfg.extent_margin_m, extent[1] + self.cfg.extent_margin_m
         T_o_w = inverse(T_w_o_pred)
         return np.array([np.all((P >= lo) & (P <= hi), axis=1).mean() if len(P) else 0.0
                          for P in (transform(T_o_w, X) for X in X_w)])
