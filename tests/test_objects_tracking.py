@@ -1061,6 +1061,32 @@ def test_point_fusion_keeps_the_object_frame_on_the_body(shape_only):
         np.testing.assert_allclose(others, np.tile([0.0, 0.0, -share * 0.4], (len(others), 1)), atol=1e-9)
 
 
+@pytest.mark.parametrize("gated", [True, False])
+def test_a_wrong_stereo_depth_is_not_fused_into_the_object(gated):
+    """A car at 34 m seen again at its pose with one keypoint's stereo match wrong (4.2 m, as crossing s84 f2): with
+    objects.fuse_chi2 that observation is left out and the car's points stay where they were; without the test
+    (fuse_chi2 huge) its depth information, ~4000x a far point's, makes the points' common shift, which
+    fuse_shape_only removes, and every other point moves by half of it (~15 m)."""
+    rng = np.random.default_rng(5)
+    car = Body(rng, 1001, 30, (4.0, 1.5, 1.5))
+    T_car = make_pose(np.eye(3), np.array([-1.0, 0.9, 34.0]))
+    objects = ObjectMap()
+    trk = tracker("objects.filter=false", *(() if gated else ("objects.fuse_chi2=1e12",)))
+    (e,) = trk.track(make_frame(0, [(car, T_car)]), None, objects).estimates
+    obs = objects.tracks[e.track_id].last
+    X_before = objects.points.X_o[obs.pt_ids].copy()
+    frame = make_frame(1, [(car, T_car)])
+    kp = np.array([np.flatnonzero((frame.keypoints.desc == d).all(1))[0] for d in objects.points.desc[obs.pt_ids]])
+    frame.depth[kp[0]] = 4.2
+    frame.u_right[kp[0]] = frame.keypoints.uv[kp[0], 0] - CAMERA.bf / 4.2
+    trk._fuse_points(frame, objects, obs.T_w_o, kp, obs.pt_ids)
+    moved = np.linalg.norm(objects.points.X_o[obs.pt_ids] - X_before, axis=1)
+    if gated:
+        assert moved.max() < 1e-9
+    else:
+        assert np.median(moved[1:]) > 10.0
+
+
 def test_predicted_box_follows_an_approaching_object_out_of_the_image():
     """The motion-compensated box of a car that comes at the camera (14 m to 4 m in 0.4 s) grows with
     it and is clipped at the image border as its instance box is; the car keeps its id through the

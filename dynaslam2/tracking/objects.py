@@ -201,22 +201,40 @@ class ObjectTracker:
     def _fuse_points(self, frame: Frame, objects: ObjectMap, T_w_o: np.ndarray, kp: np.ndarray, pts: np.ndarray) -> None:
         """Average the stereo observations of inlier keypoints `kp` (measured object pose `T_w_o`)
         into their object points `pts`, weighted by depth information, so points first seen far away
-        settle where close observations put them (objects.fuse_points; BA refines them on keyframes)."""
+        settle where close observations put them (objects.fuse_points; BA refines them on keyframes).
+        An observation whose disparity fails fuse_chi2 against its point's at `T_w_o` is left out (a wrong
+        stereo match: its depth information, high up close, would move the point and, through
+        fuse_shape_only's common shift, every other point)."""
         if not self.cfg.fuse_points:
             return
         close = (frame.depth[kp] > 0) & (frame.depth[kp] <= self.cfg.max_point_depth_m)
         kp, pts = kp[close], pts[close]
+        P = objects.points
+        consistent = self._disparity_consistent(frame, T_w_o, kp, P.X_o[pts], P.weight[pts])
+        kp, pts = kp[consistent], pts[consistent]
         if len(kp) == 0:
             return
         T_o_w = inverse(T_w_o)
         X_o = self._world_points(frame, kp) @ T_o_w[:3, :3].T + T_o_w[:3, 3]
-        P = objects.points
         w_old, w_new = P.weight[pts], self._depth_weight(frame, kp)
         r = X_o - P.X_o[pts]
         if self.cfg.fuse_shape_only and w_new.sum() > 0:
             r -= (w_new[:, None] * r).sum(axis=0) / w_new.sum()
         P.X_o[pts] += (w_new / (w_old + w_new))[:, None] * r
         P.weight[pts] = w_old + w_new
+
+    def _disparity_consistent(self, frame: Frame, T_w_o: np.ndarray, kp: np.ndarray, X_o: np.ndarray,
+                              weight: np.ndarray) -> np.ndarray:
+        """Mask of the stereo keypoints `kp` whose disparity agrees with that of their object points `X_o` (depth
+        information `weight`) placed at `T_w_o`: squared difference within fuse_chi2 of the sum of the two
+        variances (1 px at the keypoint's level; the point's depth sigma at its predicted depth)."""
+        z_pred = transform(frame.T_c_w @ T_w_o, X_o)[:, 2]
+        ahead = z_pred > 0
+        zp = np.where(ahead, z_pred, 1.0)
+        bf = self.camera.bf
+        with np.errstate(divide="ignore"):
+            var = 1.0 / self.inv_level_sigma2[frame.keypoints.octave[kp]] + (bf / zp**2) ** 2 / weight
+        return ahead & ((bf / frame.depth[kp] - bf / zp) ** 2 <= self.cfg.fuse_chi2 * var)
 
     def _compact(self, X: np.ndarray) -> np.ndarray:
         """Mask of points within max_point_spread_m of their median (drops mask-border background)."""
