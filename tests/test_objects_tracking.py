@@ -1707,6 +1707,28 @@ def test_a_coasting_track_is_measured_by_its_mask(n_keypoints, depth_error_m):
         assert np.linalg.norm(obs.T_w_o[:3, 3] - (T[obs.frame_index] @ T_off)[:3, 3]) < 0.1
 
 
+@pytest.mark.parametrize("mask_depth", [True, False])
+def test_a_person_box_joined_without_a_registration_is_measured_by_its_mask(mask_depth):
+    """A person walks 1.4 m/s across at 12 m for 4 frames, then stands while showing only keypoints its points do not
+    match (a new appearance: no pose, no registration; its box still joins the track): with the pedestrians'
+    mask_depth_classes its mask measures the track (the mask's centre taken as a body point at the first such
+    frame), which stands too (frames 6-10: under 5 cm); without, the box joins carry the walking prediction on."""
+    rng = np.random.default_rng(8)
+    person = Body(rng, 2001, 40, (0.6, 1.7, 0.5))
+    T = [make_pose(np.eye(3), np.array([-1.0 + 0.14 * min(i, 3), 0.5, 12.0])) for i in range(11)]
+    objects = ObjectMap()
+    trk = tracker(f"objects.mask_depth_classes=[{'pedestrian' if mask_depth else ''}]")
+    image = np.zeros((CAMERA.height, CAMERA.width), np.uint8)
+    for i in range(11):
+        body = person if i < 4 else person.part(np.arange(40), rng=rng)
+        instances, depth = rendered_masks([(person, T[i])])
+        trk.track(make_frame(i, [(body, T[i])]), instances, objects, image, depth_image=depth)
+    (tr,) = objects.tracks.values()
+    assert [o.frame_index for o in tr.observations] == list(range(11))
+    moved = np.linalg.norm(tr.observations[10].T_w_o[:3, 3] - tr.observations[6].T_w_o[:3, 3])
+    assert (moved < 0.05) if mask_depth else (moved > 0.4), moved
+
+
 @pytest.mark.parametrize("kf_points_all_objects", [True, False])
 def test_a_keyframe_gives_a_tracked_object_the_points_it_shows(kf_points_all_objects):
     """A car tracked from its rear half shows its front half at a keyframe where its tracking is not weak: with

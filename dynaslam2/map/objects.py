@@ -98,8 +98,9 @@ class ObjectTrack:
     constant-velocity prediction (eq. 5) applies. `state_mean` (6,) / `state_cov` (6, 6): constant-
     velocity filter of the object-frame origin (world position, world velocity) at the last observation;
     `rot_cov` (6, 6): covariance of the rotation filter (rotation, angular velocity), whose mean is the last
-    observation's rotation and w_o. `appearance`: colour histograms of its instance at its latest observations
-    (`tracking.appearance`, newest last, at most objects.appearance_gallery).
+    observation's rotation and w_o. `mask_centre_o`: the body point (object frame) its instance mask's centre
+    measures (`ObjectTracker._mask_centre_register`). `appearance`: colour histograms of its instance at its
+    latest observations (`tracking.appearance`, newest last, at most objects.appearance_gallery).
     """
 
     track_id: int
@@ -109,6 +110,7 @@ class ObjectTrack:
     state_mean: np.ndarray | None = None
     state_cov: np.ndarray | None = None
     rot_cov: np.ndarray | None = None
+    mask_centre_o: np.ndarray | None = None
     appearance: list[np.ndarray] = field(default_factory=list)
 
     @property

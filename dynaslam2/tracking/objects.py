@@ -658,13 +658,18 @@ class ObjectTracker:
         the instance first (`_reanchor`; always with `reanchor`: a track re-identified by appearance), and a vehicle's
         instance outside its predicted extent adds no points (`_outside_extent`, join_points_min_extent_fraction). An
         instance with fewer than min_inliers close keypoints (coasting) adds no points; its mask measures the track's
-        position instead when it can (`masks`, `_mask_register`)."""
+        position instead when it can (`masks`, `_mask_register`). A person's (mask_depth_classes) whose keypoints do
+        not register measures it by its mask's centre (`_mask_centre_register`; a walking person's keypoints seldom
+        match the points it showed before: without, its box joins carried a still prediction on for seconds)."""
         kp, X_w, _ = points
         if len(kp) < self.cfg.min_inliers:
             kp, X_w = kp[:0], X_w[:0]
             T_w_o, kp_in, pt_in, info = self._mask_register(frame, objects, track, T_w_o_pred, masks, inst, box)
         else:
             T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
+            if info is None and track.cls in self.cfg.mask_depth_classes:
+                T_w_o, _, _, info = self._mask_register(frame, objects, track, T_w_o_pred, masks, inst, box,
+                                                        by_centre=True)
         rest = ~np.isin(kp, kp_in)
         if not len(kp_in) and len(kp):
             T_w_o, keep = self._reanchor(frame, objects, track, T_w_o, X_w, always=reanchor)
@@ -818,7 +823,7 @@ class ObjectTracker:
         return T_w_o, kp_m[inl], pt_m[inl], info
 
     def _mask_register(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
-                       masks: MaskMeasurement | None, inst: int, box: np.ndarray
+                       masks: MaskMeasurement | None, inst: int, box: np.ndarray, by_centre: bool = False
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """`_register` for a coasting instance: the predicted pose of `track` translated to the position its mask
         measures (`MaskMeasurement.position`: against >= register_min_matches of the track's points predicted
@@ -827,21 +832,43 @@ class ObjectTracker:
         position filter's validation gate at mask_gate_nis passes (a mask's disparity can take a wrong peak: one
         found 5 m for a person at 22 m); else the prediction, no match and None (also without the filter's state).
         (A box join's points made at a wrong prediction carry wrong depths: 3 of a person's 6 at 14-16 m against
-        18.6 m, crossing s40 f40, moved its mask measurement 3 m.)"""
+        18.6 m, crossing s40 f40, moved its mask measurement 3 m.) `by_centre`: the mask's centre against the body
+        point it was first found at (`_mask_centre_register`), whatever the track's points."""
         cfg = self.cfg
         none = np.zeros(0, np.int64)
         if masks is None or not cfg.filter or track.state_mean is None:
             return T_w_o_pred, none, none, None
-        pts = objects.points.of_track(track.track_id)
-        again = objects.points.n_found[pts] >= 3  # 1 when added, 2 after the observation that made it
-        X_o = objects.points.X_o[pts[again]] if len(pts) >= cfg.min_inliers else None
-        measured = masks.position(frame, T_w_o_pred, X_o, inst, box, cfg.register_min_matches)
+        if by_centre:
+            measured = self._mask_centre_register(frame, track, T_w_o_pred, masks, inst, box)
+        else:
+            pts = objects.points.of_track(track.track_id)
+            again = objects.points.n_found[pts] >= 3  # 1 when added, 2 after the observation that made it
+            X_o = objects.points.X_o[pts[again]] if len(pts) >= cfg.min_inliers else None
+            measured = masks.position(frame, T_w_o_pred, X_o, inst, box, cfg.register_min_matches)
         if measured is None or gated(track, frame.timestamp - track.last.timestamp, measured[0],
                                      lambda: measured[1], cfg, cfg.mask_gate_nis):
             return T_w_o_pred, none, none, None
         T_w_o = T_w_o_pred.copy()
         T_w_o[:3, 3] = measured[0]
         return T_w_o, none, none, measured[1]
+
+    @staticmethod
+    def _mask_centre_register(frame: Frame, track: ObjectTrack, T_w_o_pred: np.ndarray, masks: MaskMeasurement,
+                              inst: int, box: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The track's origin measured by instance `inst`'s mask as a whole: the mask's centre (its centroid at its
+        depth) is the body's point `track.mask_centre_o` (object frame), taken at the first such measurement where
+        the prediction puts it, so that the origin stays where it is on the body (a first measurement adds no
+        information). (position (3,), information (3, 3)) or None."""
+        if track.mask_centre_o is None:
+            measured = masks.position(frame, T_w_o_pred, None, inst, box, 1)
+            if measured is not None:
+                track.mask_centre_o = T_w_o_pred[:3, :3].T @ (measured[0] - T_w_o_pred[:3, 3])
+            return None
+        R = T_w_o_pred[:3, :3]
+        T_centre = T_w_o_pred.copy()
+        T_centre[:3, 3] += R @ track.mask_centre_o
+        measured = masks.position(frame, T_centre, None, inst, box, 1)
+        return None if measured is None else (measured[0] - R @ track.mask_centre_o, measured[1])
 
     def _offset_information(self, frame: Frame, objects: ObjectMap, kp: np.ndarray, pts: np.ndarray,
                             X_w: np.ndarray) -> np.ndarray:
