@@ -964,6 +964,32 @@ def test_box_association_reanchors_a_track_whose_prediction_ran_off():
     assert max(errors) < 0.05, errors
 
 
+def test_a_reanchor_lands_on_the_points_last_seen_not_on_stale_ones():
+    """Crossing s1 f98: a person's track kept three points placed 10 m off its body long before (never in view
+    again, so never culled) after the points it was last seen with had been culled; it re-appeared with new
+    keypoints and its box join re-anchored the track on the stale points: 10 m off. The re-anchor takes the points
+    of the newest observation that had any (`last_seen_points`), so the new points join the body where the track
+    predicts it. The re-anchor gate is off, as after a long coast (objects.reanchor_gate_nis)."""
+    rng = np.random.default_rng(41)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * i, 0.8, 15.0])) for i in range(8)]
+    objects, trk = ObjectMap(), tracker("objects.reanchor_gate_nis=inf")
+    e = track_alone(trk, objects, car, T_car[:4])
+    tr = objects.tracks[e.track_id]
+    T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
+    P = objects.points
+    P.alive[P.of_track(tr.track_id)] = False  # culled
+    stale = np.array([0.0, 0.0, -10.0]) + rng.normal(0.0, 0.1, (3, 3))
+    objects.add_points(tr.track_id, stale, rng.integers(0, 256, (3, 32)).astype(np.uint8), 1.0)
+    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    errors = []
+    for i in range(4, 8):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+        assert e.track_id == tr.track_id
+        errors.append(np.linalg.norm(e.T_w_o[:3, 3] - (T_car[i] @ T_off)[:3, 3]))
+    assert max(errors) < 0.05, errors
+
+
 @pytest.mark.parametrize("gate", [16.27, float("inf")])
 def test_validation_gate_rejects_an_association_outlier(gate):
     """Frame 8 shows the car's keypoints 1.5 m deeper than its constant-velocity motion allows (a wrong

@@ -32,13 +32,24 @@ def _hungarian(cost: np.ndarray, ok: np.ndarray) -> list[tuple[int, int]]:
     return [(k, t) for k, t in zip(rows.tolist(), cols.tolist()) if ok[k, t]]
 
 
+def last_seen_points(objects: ObjectMap, track: ObjectTrack) -> np.ndarray:
+    """Ids of the points of the track's newest observation that has any (culled since or not: the part of the object
+    last seen), else of its living points."""
+    for obs in reversed(track.observations):
+        if len(obs.pt_ids):
+            return obs.pt_ids
+    return objects.points.of_track(track.track_id)
+
+
 def reanchored_pose(objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, X_w: np.ndarray,
                     spread_m: float | None) -> np.ndarray | None:
-    """The predicted pose translated so that the median of an instance's world points `X_w` lands on the track's
-    median point, when that median lies beyond `spread_m` of the box of the track's points (object frame: the
-    prediction ran off, or the points are not the track's object; None: always); None when it lies within, or
-    without points."""
-    X_o = objects.points.X_o[objects.points.of_track(track.track_id)]
+    """The predicted pose translated so that the median of an instance's world points `X_w` lands on the median of
+    the track's points last seen (`last_seen_points`), when that median lies beyond `spread_m` of their box (object
+    frame: the prediction ran off, or the points are not the track's object; None: always); None when it lies within,
+    or without points. (All living points: a person's three points placed 10 m off its body long before, never in
+    view again and so never culled, outlived those it was last seen with, and the re-anchor put its track 10 m off,
+    crossing s1 f98.)"""
+    X_o = objects.points.X_o[last_seen_points(objects, track)]
     if not len(X_o) or not len(X_w):
         return None
     R, t = T_w_o_pred[:3, :3], T_w_o_pred[:3, 3]

@@ -889,9 +889,9 @@ class ObjectTracker:
                   X_w: np.ndarray, always: bool = False) -> tuple[np.ndarray, bool]:
         """(pose, whether to add the points): the pose at which a box join adds the instance's points `X_w` to
         `track`: the prediction, or, when their median would lie beyond max_point_spread_m of the box of the track's
-        points (object frame; a prediction run off, e.g. in depth while the object was seen without stereo) or
-        `always` (a track re-identified after up to max_lost_s), the prediction translated so that their median
-        lands on the track's median point (`reanchored_pose`), with the track's velocity and filter state forgotten.
+        points last seen (object frame; a prediction run off, e.g. in depth while the object was seen without stereo)
+        or `always` (a track re-identified after up to max_lost_s), the prediction translated so that their median
+        lands on those points' median (`reanchored_pose`), with the track's velocity and filter state forgotten.
         Where the filter of a track measured within join_max_gap_s excludes that (`implausible_jump`: a part of a
         long vehicle not seen before, or wrong depths), the prediction, and the points are not added."""
         T_w_o = reanchored_pose(objects, track, T_w_o_pred, X_w, None if always else self.cfg.max_point_spread_m)
