@@ -1183,6 +1183,32 @@ def test_a_car_whose_last_seen_part_has_left_the_image_keeps_its_track_by_the_pa
     assert e7.track_id == e.track_id and list(objects.tracks) == [e.track_id]
 
 
+def test_a_car_predicted_just_outside_the_image_stays_a_candidate_within_its_uncertainty():
+    """Crossing s99 f42: a car at the left border (its box a sliver there) whose prediction put its 3D extent 2 px
+    outside the image, at a position sigma of ~7 px there: `predicted_box` called it gone and a new track took the
+    car (an id switch on an unoccluded track). The extent is grown by the prediction's uncertainty
+    (`_prediction_margin_px`): a prediction 3 px outside keeps the track a candidate; one that many sigmas outside
+    still leaves it out (an object that has left the view)."""
+    rng = np.random.default_rng(37)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-4.5 - 0.5 * i, 0.5, 10.0])) for i in range(5)]  # the border: x -5.2 m
+    objects, trk = ObjectMap(), tracker()
+    e = track_alone(trk, objects, car, T_car[:4])
+    tr = objects.tracks[e.track_id]
+    frame = make_frame(4, [(car, T_car[4])])
+    T_pred = trk.predicted_pose(tr, frame.timestamp)
+    X_o = objects.points.X_o[objects.points.of_track(tr.track_id)]
+    x_max = np.percentile(X_o, 95, axis=0)  # the extent's right edge (`_extent`), at the extent's mean depth
+    depth = float(transform(frame.T_c_w @ T_pred, X_o)[:, 2].mean())
+    margin = trk.boxes._prediction_margin_px(tr, frame, depth)
+    assert 5.0 < margin < 50.0
+    for outside_px, kept in ((3.0, True), (margin + 30.0, False)):
+        T = T_pred.copy()  # moved left until the extent's right edge projects `outside_px` left of the image
+        u_edge = CAMERA.project(transform(frame.T_c_w @ T, x_max[None]))[0, 0]
+        T[0, 3] -= (u_edge + outside_px) * transform(frame.T_c_w @ T, x_max[None])[0, 2] / CAMERA.fx
+        assert (trk.boxes.predicted_box(tr, frame, T, objects) is not None) == kept
+
+
 def test_ba_write_back_keeps_each_object_frame_on_the_body():
     """After the BA with objects, each object's points keep their mean position in the object frame: the
     frame is translated back by the BA's common shift, the world points stay, and the constant-velocity

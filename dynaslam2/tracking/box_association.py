@@ -157,7 +157,8 @@ class BoxAssociation:
     def _extent_box(self, objects: ObjectMap, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray
                     ) -> np.ndarray | None:
         """The image box of the track's 3D extent (`_extent`, without the margin) at the predicted pose: of its
-        corners in front of the camera; None without points or with every corner behind the camera."""
+        corners in front of the camera, grown by the prediction's uncertainty (`_prediction_margin_px`); None
+        without points or with every corner behind the camera."""
         extent = _extent(objects, track)
         if extent is None:
             return None
@@ -167,7 +168,20 @@ class BoxAssociation:
         if not len(X_c):
             return None
         uv = self.camera.project(X_c)
-        return np.r_[uv.min(axis=0), uv.max(axis=0)]
+        margin = self._prediction_margin_px(track, frame, float(X_c[:, 2].mean()))
+        return np.r_[uv.min(axis=0) - margin, uv.max(axis=0) + margin]
+
+    def _prediction_margin_px(self, track: ObjectTrack, frame: Frame, depth: float) -> float:
+        """The image distance (px) within which the position filter's prediction at `frame` (`predict_state`) puts
+        the object, at `depth`: the largest position sigma seen there, times sqrt(box_gate_chi2) (0 without the
+        filter's state). A prediction run off by a few px must not tell a car at the image border that it has left
+        (crossing s99 f42: its extent predicted 2 px outside the image at a sigma of 7 px, and a new track took the
+        car)."""
+        if not (self.cfg.filter and track.state_mean is not None):
+            return 0.0
+        P = predict_state(track, frame.timestamp - track.last.timestamp, self.cfg)[1][:3, :3]
+        sigma_m = float(np.sqrt(np.linalg.eigvalsh(P)[-1]))
+        return float(np.sqrt(self.cfg.box_gate_chi2)) * self.camera.fx * sigma_m / depth
 
     def image_extrapolated_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray | None:
         """The last 2D box moved on to `timestamp` at the image velocity of the track's boxes since its observation
