@@ -938,6 +938,28 @@ def test_tracks_are_reported_from_their_min_observations_th_observation_on():
     assert [len(trk.estimates(objects, 1, m)) for m in (2, 3)] == [1, 0]
 
 
+def reappearing_car_errors(seed: int, tamper) -> tuple[list[float], ObjectTrack]:
+    """A car tracked alone at 15 m for 4 frames with the re-anchor gate off (objects.reanchor_gate_nis),
+    `tamper(objects, track, rng)` applied to its track, then seen with a new appearance (box joins) for 4 frames:
+    the position errors of its estimates against the body point of its first origin, and the track (one id
+    asserted)."""
+    rng = np.random.default_rng(seed)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * i, 0.8, 15.0])) for i in range(8)]
+    objects, trk = ObjectMap(), tracker("objects.reanchor_gate_nis=inf")
+    e = track_alone(trk, objects, car, T_car[:4])
+    tr = objects.tracks[e.track_id]
+    T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
+    tamper(objects, tr, rng)
+    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
+    errors = []
+    for i in range(4, 8):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+        assert e.track_id == tr.track_id
+        errors.append(np.linalg.norm(e.T_w_o[:3, 3] - (T_car[i] @ T_off)[:3, 3]))
+    return errors, tr
+
+
 def test_box_association_reanchors_a_track_whose_prediction_ran_off():
     """A car tracked at 15 m whose track ran off to 30 m along the viewing ray (as pose-only estimates from a
     few monocular matches did on an occluded car, sim following s15) re-appears with a new appearance and joins
@@ -945,21 +967,12 @@ def test_box_association_reanchors_a_track_whose_prediction_ran_off():
     forgotten), so the points added sit on the body and the next frames are right, with one id. The re-anchor gate
     is off (objects.reanchor_gate_nis): the run-off is written here into a track measured a frame earlier, whose
     filter then excludes the re-anchor; on s15 it came after 2.4 s without a measurement."""
-    rng = np.random.default_rng(16)
-    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
-    T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * i, 0.8, 15.0])) for i in range(8)]
-    objects, trk = ObjectMap(), tracker("objects.reanchor_gate_nis=inf")
-    e = track_alone(trk, objects, car, T_car[:4])
-    tr = objects.tracks[e.track_id]
-    T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
-    tr.last.T_w_o[:3, 3] *= 2.0  # the camera is at the world origin: twice as far along the ray
-    tr.state_mean[:3] = tr.last.T_w_o[:3, 3]
-    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
-    errors = []
-    for i in range(4, 8):
-        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
-        assert e.track_id == tr.track_id
-        errors.append(np.linalg.norm(e.T_w_o[:3, 3] - (T_car[i] @ T_off)[:3, 3]))
+
+    def run_off(objects, tr, rng):
+        tr.last.T_w_o[:3, 3] *= 2.0  # the camera is at the world origin: twice as far along the ray
+        tr.state_mean[:3] = tr.last.T_w_o[:3, 3]
+
+    errors, tr = reappearing_car_errors(16, run_off)
     assert not tr.observations[4].measured and tr.observations[5].measured
     assert max(errors) < 0.05, errors
 
@@ -969,24 +982,15 @@ def test_a_reanchor_lands_on_the_points_last_seen_not_on_stale_ones():
     again, so never culled) after the points it was last seen with had been culled; it re-appeared with new
     keypoints and its box join re-anchored the track on the stale points: 10 m off. The re-anchor takes the points
     of the newest observation that had any (`last_seen_points`), so the new points join the body where the track
-    predicts it. The re-anchor gate is off, as after a long coast (objects.reanchor_gate_nis)."""
-    rng = np.random.default_rng(41)
-    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
-    T_car = [make_pose(np.eye(3), np.array([-2.0 + 0.2 * i, 0.8, 15.0])) for i in range(8)]
-    objects, trk = ObjectMap(), tracker("objects.reanchor_gate_nis=inf")
-    e = track_alone(trk, objects, car, T_car[:4])
-    tr = objects.tracks[e.track_id]
-    T_off = inverse(T_car[0]) @ tr.observations[0].T_w_o
-    P = objects.points
-    P.alive[P.of_track(tr.track_id)] = False  # culled
-    stale = np.array([0.0, 0.0, -10.0]) + rng.normal(0.0, 0.1, (3, 3))
-    objects.add_points(tr.track_id, stale, rng.integers(0, 256, (3, 32)).astype(np.uint8), 1.0)
-    car.desc = rng.integers(0, 256, car.desc.shape).astype(np.uint8)
-    errors = []
-    for i in range(4, 8):
-        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
-        assert e.track_id == tr.track_id
-        errors.append(np.linalg.norm(e.T_w_o[:3, 3] - (T_car[i] @ T_off)[:3, 3]))
+    predicts it. The re-anchor gate is off, as after a long coast."""
+
+    def stale_points_outlive_the_seen(objects, tr, rng):
+        P = objects.points
+        P.alive[P.of_track(tr.track_id)] = False  # culled
+        stale = np.array([0.0, 0.0, -10.0]) + rng.normal(0.0, 0.1, (3, 3))
+        objects.add_points(tr.track_id, stale, rng.integers(0, 256, (3, 32)).astype(np.uint8), 1.0)
+
+    errors, _ = reappearing_car_errors(41, stale_points_outlive_the_seen)
     assert max(errors) < 0.05, errors
 
 
