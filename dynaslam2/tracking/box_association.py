@@ -156,7 +156,7 @@ class BoxAssociation:
 
     def _extent_box(self, objects: ObjectMap, track: ObjectTrack, frame: Frame, T_w_o_pred: np.ndarray
                     ) -> np.ndarray | None:
-        """The image box of the track's 3D extent (`_extent`, without the margin) at the predicted pose: of its
+        """The image box of the track's 3D extent (`_extent`, without extent_margin_m) at the predicted pose: of its
         corners in front of the camera, grown by the prediction's uncertainty (`_prediction_margin_px`); None
         without points or with every corner behind the camera."""
         extent = _extent(objects, track)
