@@ -49,8 +49,13 @@ def _gl_context_class():
 class RenderConfig:
     """Rendering quality knobs.
 
-    msaa_samples: multisample anti-aliasing of the colour passes (MuJoCo's `offsamples`). 0 halves the
-      render time on the CPU rasterizer; textures stay mip-mapped, only geometry edges alias.
+    msaa_samples: multisample anti-aliasing of the colour passes (MuJoCo's `offsamples`; Mesa's CPU rasterizer
+      gives at most 4). A camera integrates light over each pixel, so a silhouette falls between pixel values;
+      drawn without it, a silhouette steps at whole pixels, placed in the left and right image independently,
+      and stereo at object outlines measured that quantization: object keypoints whose SAD window holds another
+      instance were 0.21 px off the rendered depth's disparity (median; 22 % over 0.5 px) against 0.06 px
+      inside, with 4 samples 0.15 px (15 %) and 0.06 px (crossing s100, every 5th frame). Instance ids and
+      depth come out the same either way (tested). 0 renders ~2x faster on the CPU.
     box_near_m: near plane (m) at which actor boxes are clipped when projected to find their image window.
     amodal_crop: render each actor's amodal pass only in the window of its projected box (pixel-exact
       with the full-image pass, which `False` selects; kept for verification).
@@ -58,7 +63,7 @@ class RenderConfig:
       `numslices`/`numstacks`, default 28/16): vertex work dominates the CPU rasterizer's cost.
     """
 
-    msaa_samples: int = 0
+    msaa_samples: int = 4
     box_near_m: float = 0.05
     amodal_crop: bool = True
     mesh_slices: int = 12

@@ -23,7 +23,8 @@ from sim.scenarios import ScenarioConfig
 # Bumped whenever the rendered world changes for the same scenario config and seed, so that cached sequences
 # (benchmarks) are not silently stale. 2: vehicle paint and glass undistorted (were stretched per box face).
 # 3: `crossing`'s turning vehicles slow for the turn (turned at up to 2.5 rad/s, 10-24 m/s^2 lateral).
-WORLD_VERSION = 3
+# 4: colour passes anti-aliased (`sim.render.RenderConfig.msaa_samples` 0 -> 4; ids and depth unchanged).
+WORLD_VERSION = 4
 
 # OpenCV camera axes (x right, y down, z forward) expressed in the ego body frame (x fwd, y left, z up)
 R_BODY_CV = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -298,7 +299,7 @@ def _setup_visual(spec: mujoco.MjSpec, cfg: ScenarioConfig) -> None:
     spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
     spec.visual.headlight.specular = [0.05, 0.05, 0.05]
     spec.visual.quality.shadowsize = 0
-    spec.visual.quality.offsamples = 0  # no multisampling: exact per-pixel ids/depth, ~3x faster on CPU
+    spec.visual.quality.offsamples = 0  # the renderer sets it from its RenderConfig
     spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
                      rgb1=[0.55, 0.68, 0.88], rgb2=[0.92, 0.94, 0.98], width=256, height=256)
     spec.worldbody.add_light(name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, dir=[0.3, 0.5, -0.8],

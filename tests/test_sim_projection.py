@@ -227,6 +227,34 @@ def test_amodal_windows_and_full_renders_agree(scenario):
             assert np.all(a.amodal_px[~visible] == 0)
 
 
+def test_silhouettes_are_anti_aliased_and_labels_stay_exact(scenario):
+    """The default colour passes blend a silhouette's pixels (a camera integrates over each pixel) while the
+    instance ids and depth equal those of a render without multisampling."""
+    world = build_world(scenario)
+    K = camera_intrinsics(scenario)
+    W, H = scenario.image_size
+    with StereoRenderer(world, W, H) as smooth, StereoRenderer(world, W, H, RenderConfig(msaa_samples=0)) as aliased:
+        n_edge = n_blended = 0
+        for t in (0.0, 0.6):
+            world.set_time(t)
+            T_m_c = world.ego_T_m_c(t)
+            a = smooth.render(T_m_c, K, right=True)
+            b = aliased.render(T_m_c, K, right=True)
+            np.testing.assert_array_equal(a.instances, b.instances)
+            np.testing.assert_array_equal(a.depth, b.depth)
+            edge = np.zeros(a.instances.shape, bool)  # pixels with a horizontal neighbour of another instance
+            step = a.instances[:, 1:] != a.instances[:, :-1]
+            edge[:, 1:] |= step
+            edge[:, :-1] |= step
+            changed = np.any(a.left != b.left, axis=2)
+            n_edge += int(edge.sum())
+            n_blended += int((changed & edge).sum())
+            assert changed.mean() < 0.15, f"t={t}: {changed.mean():.0%} of the pixels changed, not only edges"
+            assert np.any(a.right != b.right)
+    assert n_edge > 200
+    assert n_blended > 0.3 * n_edge, f"{n_blended} of {n_edge} silhouette pixels blended"
+
+
 def test_gt_velocities_match_pose_differences(seq):
     """v_w and w_w (in the sequence world) equal central differences of the GT object poses."""
     from dynaslam2.geometry.se3 import so3_log
