@@ -49,13 +49,14 @@ def _gl_context_class():
 class RenderConfig:
     """Rendering quality knobs.
 
-    msaa_samples: multisample anti-aliasing of the colour passes (MuJoCo's `offsamples`; Mesa's CPU rasterizer
-      gives at most 4). A camera integrates light over each pixel, so a silhouette falls between pixel values;
-      drawn without it, a silhouette steps at whole pixels, placed in the left and right image independently,
-      and stereo at object outlines measured that quantization: object keypoints whose SAD window holds another
-      instance were 0.21 px off the rendered depth's disparity (median; 22 % over 0.5 px) against 0.06 px
-      inside, with 4 samples 0.15 px (15 %) and 0.06 px (crossing s100, every 5th frame). Instance ids and
-      depth come out the same either way (tested). 0 renders ~2x faster on the CPU.
+    msaa_samples: multisample anti-aliasing of the colour passes (MuJoCo's `offsamples`; on Mesa's CPU rasterizer
+      8 and 16 give the same images as 4). A camera integrates light over each pixel, so a silhouette falls
+      between pixel values; drawn without it, a silhouette steps at whole pixels, placed in the left and right
+      image independently, and stereo at object outlines measured that quantization: object keypoints whose SAD
+      window holds another instance were 0.21 px off the rendered depth's disparity (median; 22 % over 0.5 px)
+      against 0.06 px inside, with 4 samples 0.15 px (15 %) and 0.06 px (crossing s100, every 5th frame;
+      benchmarks/bench_object_stereo.py). Instance ids and depth come out the same either way (tested). With 0
+      the colour passes run 1.6-1.8x faster on the CPU (`dynaslam2 bench sim`).
     box_near_m: near plane (m) at which actor boxes are clipped when projected to find their image window.
     amodal_crop: render each actor's amodal pass only in the window of its projected box (pixel-exact
       with the full-image pass, which `False` selects; kept for verification).
