@@ -25,7 +25,8 @@ import numpy as np
 
 from dynaslam2.config import load_config
 from dynaslam2.errors import InputError
-from dynaslam2.features.orb import base_to_level, level_to_base, to_gray
+from dynaslam2.features.orb import base_to_level, level_scales, to_gray
+from dynaslam2.features.stereo import labels_at_level
 from dynaslam2.io.sequence import open_sequence
 from dynaslam2.tracking.frontend import FrameBuilder
 from sim.scenarios import load_scenario
@@ -34,19 +35,16 @@ from bench_dynamic import ensure_sequence  # this script's folder (python benchm
 
 
 def window_on_other_label(uv: np.ndarray, octave: np.ndarray, pyr_shapes: list[tuple[int, int]],
-                          labels: np.ndarray, w: int, h: int) -> np.ndarray:
+                          scales: np.ndarray, labels: np.ndarray, w: int, h: int) -> np.ndarray:
     """(N,) whether each keypoint's (2w+1) x (2h+1) window on its level holds a label other than its own pixel's
-    (`labels`: HxW level 0; a level pixel takes its nearest level-0 pixel's label)."""
+    (`labels`: HxW level 0, sampled on each level by `labels_at_level`; `scales`: `level_scales`)."""
     H, W = labels.shape
-    scales = np.array([(W / s[1], H / s[0]) for s in pyr_shapes])
     own = labels[np.clip(np.rint(uv[:, 1]).astype(int), 0, H - 1), np.clip(np.rint(uv[:, 0]).astype(int), 0, W - 1)]
     other = np.zeros(len(uv), bool)
     for level in np.unique(octave).tolist():
         sel = np.flatnonzero(octave == level)
         hl, wl = pyr_shapes[level]
-        rows = np.clip(np.rint(level_to_base(np.arange(hl), scales[level, 1])).astype(int), 0, H - 1)
-        cols = np.clip(np.rint(level_to_base(np.arange(wl), scales[level, 0])).astype(int), 0, W - 1)
-        lab = np.pad(labels[rows][:, cols], ((h, h), (w, w)), mode="edge")
+        lab = np.pad(labels_at_level(labels, pyr_shapes[level], scales[level]), ((h, h), (w, w)), mode="edge")
         su = np.clip(np.rint(base_to_level(uv[sel, 0], scales[level, 0])).astype(int), 0, wl - 1)
         sv = np.clip(np.rint(base_to_level(uv[sel, 1], scales[level, 1])).astype(int), 0, hl - 1)
         win = np.lib.stride_tricks.sliding_window_view(lab, (2 * h + 1, 2 * w + 1))[sv, su]
@@ -54,8 +52,8 @@ def window_on_other_label(uv: np.ndarray, octave: np.ndarray, pyr_shapes: list[t
     return other
 
 
-def frame_errors(builder: FrameBuilder, data, camera, pyr_shapes: list[tuple[int, int]], max_depth_m: float
-                 ) -> dict[str, np.ndarray]:
+def frame_errors(builder: FrameBuilder, data, camera, pyr_shapes: list[tuple[int, int]], scales: np.ndarray,
+                 max_depth_m: float) -> dict[str, np.ndarray]:
     """Per object keypoint of one frame: octave, outline flag, disparity error (px; nan without a depth)."""
     frame = builder.build(data, {})
     kp = frame.keypoints
@@ -66,7 +64,8 @@ def frame_errors(builder: FrameBuilder, data, camera, pyr_shapes: list[tuple[int
     use = on_objects & np.isfinite(z_gt) & (z_gt > 0) & (z_gt <= max_depth_m)
     uv, octave = kp.uv[use].astype(np.float64), kp.octave[use]
     stereo = builder.config.stereo
-    outline = window_on_other_label(uv, octave, pyr_shapes, data.instances, stereo.sad_window, stereo.sad_half_height)
+    outline = window_on_other_label(uv, octave, pyr_shapes, scales, data.instances, stereo.sad_window,
+                                    stereo.sad_half_height)
     z = frame.depth[use]
     error = np.where(z > 0, camera.bf / np.where(z > 0, z, 1.0) - camera.bf / z_gt[use], np.nan)
     return {"octave": octave, "outline": outline, "error": error}
@@ -104,14 +103,16 @@ def main() -> None:
         path = ensure_sequence(args.work, args.scenario, seed, args.frames, args.size, tuple(args.sim_overrides))
         seq = open_sequence(path)
         builder = FrameBuilder(config, seq.camera)
-        pyr_shapes = None
+        pyr_shapes = scales = None
         for i in range(0, len(seq), args.every):
             data = seq[i]
             if data.depth is None or data.instances is None or data.right is None:
                 raise SystemExit(f"{path}: frame {i} lacks a right image, a depth image or instances")
             if pyr_shapes is None:
-                pyr_shapes = [p.shape[:2] for p in builder.extractor.build_pyramid(to_gray(data.left))]
-            parts.append(frame_errors(builder, data, seq.camera, pyr_shapes, config.objects.max_point_depth_m))
+                pyramid = builder.extractor.build_pyramid(to_gray(data.left))
+                pyr_shapes, scales = [p.shape[:2] for p in pyramid], level_scales(pyramid)
+            parts.append(frame_errors(builder, data, seq.camera, pyr_shapes, scales,
+                                      config.objects.max_point_depth_m))
     octave = np.concatenate([p["octave"] for p in parts])
     outline = np.concatenate([p["outline"] for p in parts])
     error = np.concatenate([p["error"] for p in parts])

@@ -250,6 +250,15 @@ def match_stereo(
     return u_right, depth
 
 
+def labels_at_level(labels: np.ndarray, level_shape: tuple[int, int], scale_xy: np.ndarray) -> np.ndarray:
+    """The level-0 label image `labels` (HxW) sampled on a pyramid level of shape `level_shape` (exact scales
+    `scale_xy`, `level_scales`): each level pixel takes the label of its nearest level-0 pixel."""
+    (hl, wl), (H, W) = level_shape[:2], labels.shape
+    rows = np.clip(np.rint(level_to_base(np.arange(hl), scale_xy[1])).astype(np.int64), 0, H - 1)
+    cols = np.clip(np.rint(level_to_base(np.arange(wl), scale_xy[0])).astype(np.int64), 0, W - 1)
+    return labels[rows][:, cols]
+
+
 def search_stereo_rows(
     kp_left: Keypoints,
     idx: np.ndarray,
@@ -312,11 +321,8 @@ def search_stereo_rows(
         patch[sel] = sliding_window_view(left, (kh, k))[sv[sel], su[sel]]  # padded: row sv - h + h, column su - w + w
         strip[sel] = sliding_window_view(right, (kh, k + 2 * L_max))[sv[sel], first[sel] - w + pad]
         cols[sel] = pyr_right[level].shape[1]
-        if own is not None:  # the label image at this level: the level-0 pixel nearest to each level pixel
-            (hl, wl), (H, W) = pyr_left[level].shape, labels.shape
-            rows0 = np.clip(np.rint(level_to_base(np.arange(hl), scales[level, 1])).astype(np.int64), 0, H - 1)
-            cols0 = np.clip(np.rint(level_to_base(np.arange(wl), scales[level, 0])).astype(np.int64), 0, W - 1)
-            lab = np.pad(labels[rows0][:, cols0], ((h, h), (w, w)))
+        if own is not None:
+            lab = np.pad(labels_at_level(labels, pyr_left[level].shape, scales[level]), ((h, h), (w, w)))
             win = sliding_window_view(lab, (kh, k))[sv[sel], su[sel]]
             weight[sel] = (win == own[sel, None, None]) | (own[sel, None, None] <= 0)
     in_range = np.abs(off - L_max)[None] <= L[:, None]
