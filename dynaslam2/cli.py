@@ -43,12 +43,20 @@ def _scenario_from_args(args: argparse.Namespace):
     return load_scenario(args.scenario, overrides)
 
 
+def _add_render_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--render-set", dest="render_overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a rendering setting (sim.render.RenderConfig), e.g. --render-set msaa_samples=0 "
+                        "for aliased colour images, 1.6-1.8x faster (repeatable)")
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     from sim.generate import generate_sequence
+    from sim.render import load_render_config
 
     cfg = _scenario_from_args(args)
+    render_cfg = load_render_config(args.render_overrides)
     out = generate_sequence(cfg, Path(args.out), overwrite=args.overwrite, preview=args.preview,
-                            progress=not args.quiet)
+                            progress=not args.quiet, render_cfg=render_cfg)
     if not args.quiet:
         print(f"wrote {cfg.frames} frames of '{cfg.name}' (seed {cfg.seed}) to {out}")
     return 0
@@ -102,8 +110,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.target == "sim":
         from sim.bench import bench_sim
+        from sim.render import load_render_config
 
-        bench_sim(frames=args.frames, sizes=args.sizes, progress=not args.quiet)
+        bench_sim(frames=args.frames, sizes=args.sizes, progress=not args.quiet,
+                  render_cfg=load_render_config(args.render_overrides))
         return 0
     raise InputError(f"bench: unknown target {args.target!r}")
 
@@ -125,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output sequence folder")
     p.add_argument("--overwrite", action="store_true", help="replace a non-empty output folder")
     p.add_argument("--preview", action="store_true", help="also write preview.mp4 and a preview.png contact sheet")
+    _add_render_arg(p)
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_simulate)
 
@@ -169,6 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", choices=["sim"], help="what to benchmark: sim = sequence generation")
     p.add_argument("--frames", type=int, default=30, help="frames per configuration (default 30)")
     p.add_argument("--sizes", nargs="+", default=["640x480", "1242x375"], help="image sizes WxH")
+    _add_render_arg(p)
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_bench)
     return parser

@@ -141,16 +141,17 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, Any]:
-    """`["a.b=3", "c=x"]` -> nested dict `{"a": {"b": 3}, "c": "x"}` (values parsed as YAML scalars)."""
+def parse_overrides(overrides: list[str] | tuple[str, ...], flag: str = "--set") -> dict[str, Any]:
+    """`["a.b=3", "c=x"]` -> nested dict `{"a": {"b": 3}, "c": "x"}` (values parsed as YAML scalars);
+    errors name the command-line `flag` the strings came from."""
     nested: dict[str, Any] = {}
     for item in overrides:
         if "=" not in item:
-            raise ConfigError(f"--set {item!r}: expected key=value")
+            raise ConfigError(f"{flag} {item!r}: expected key=value")
         key, raw = item.split("=", 1)
         key = key.strip()
         if not key:
-            raise ConfigError(f"--set {item!r}: empty key")
+            raise ConfigError(f"{flag} {item!r}: empty key")
         try:
             value = yaml.safe_load(raw) if raw.strip() else ""
         except yaml.YAMLError:
@@ -160,7 +161,7 @@ def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict[str, Any]:
         for part in parts[:-1]:
             node = node.setdefault(part, {})
             if not isinstance(node, dict):
-                raise ConfigError(f"--set {item!r}: {part} is not a section")
+                raise ConfigError(f"{flag} {item!r}: {part} is not a section")
         node[parts[-1]] = value
     return nested
 

@@ -84,6 +84,7 @@ def generate_sequence(
     if not isinstance(cfg, ScenarioConfig):
         raise InputError(f"generate_sequence: expected a ScenarioConfig, got {type(cfg).__name__}")
     cfg.validate()
+    render_cfg.validate()
     out = Path(out)
     stats = stats if stats is not None else GenerationStats()
     t_setup = time.perf_counter()

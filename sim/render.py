@@ -27,6 +27,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
 
 from dynaslam2.classes import CLASS_IDS, INSTANCE_CLASS_FACTOR  # noqa: E402
+from dynaslam2.config_tree import build, parse_overrides  # noqa: E402
+from dynaslam2.errors import ConfigError  # noqa: E402
 from sim.groundtruth import box_corners_from_aabb, project_box_rects  # noqa: E402
 
 _GEOM = int(mujoco.mjtObj.mjOBJ_GEOM)
@@ -69,6 +71,22 @@ class RenderConfig:
     amodal_crop: bool = True
     mesh_slices: int = 12
     mesh_stacks: int = 8
+
+    def validate(self) -> None:
+        """ConfigError naming the first field out of range."""
+        if self.msaa_samples < 0:
+            raise ConfigError(f"msaa_samples: expected >= 0 (0 = no anti-aliasing), got {self.msaa_samples}")
+        if not self.box_near_m > 0:
+            raise ConfigError(f"box_near_m: expected a distance > 0 m, got {self.box_near_m}")
+        if self.mesh_slices < 3 or self.mesh_stacks < 2:
+            raise ConfigError(f"mesh_slices, mesh_stacks: expected >= 3 and >= 2, got {self.mesh_slices}, "
+                              f"{self.mesh_stacks}")
+
+
+def load_render_config(overrides: list[str] | tuple[str, ...] = ()) -> RenderConfig:
+    """RenderConfig's defaults with `key=value` overrides (`dynaslam2 simulate --render-set`); bad keys or
+    values raise ConfigError naming them."""
+    return build(RenderConfig, parse_overrides(list(overrides), flag="--render-set"))
 
 
 @dataclass

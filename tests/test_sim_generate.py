@@ -118,6 +118,21 @@ def test_depth_off_writes_no_depth(tmp_path):
     assert len(seq) == 2 and seq[1].depth is None
 
 
+def test_render_settings_reach_the_renderer_and_meta(tmp_path):
+    """`--render-set msaa_samples=0` renders aliased colour images: the labels and depth stay the same bytes,
+    the colour images change, and meta.json records the setting."""
+    smooth, aliased = tmp_path / "smooth", tmp_path / "aliased"
+    assert simulate(smooth, "--frames", "2") == 0
+    assert simulate(aliased, "--frames", "2", "--render-set", "msaa_samples=0") == 0
+    a, b = file_hashes(smooth), file_hashes(aliased)
+    for name in a:
+        if name.startswith(("instances", "depth")):
+            assert a[name] == b[name], name
+    assert any(a[n] != b[n] for n in a if n.startswith("image_0")), "colour images unchanged by msaa_samples=0"
+    assert json.loads((smooth / "meta.json").read_text())["render"]["msaa_samples"] == 4
+    assert json.loads((aliased / "meta.json").read_text())["render"]["msaa_samples"] == 0
+
+
 @pytest.mark.parametrize("args, words", [
     (["--scenario", "nosuch"], "unknown scenario"),
     (["--set", "nosuch_knob=1"], "nosuch_knob"),
@@ -125,6 +140,9 @@ def test_depth_off_writes_no_depth(tmp_path):
     (["--frames", "0"], "frames"),
     (["--size", "10x10"], "image_size"),
     (["--set", "occlusion=2"], "occlusion"),
+    (["--render-set", "msaa=0"], "msaa"),
+    (["--render-set", "msaa_samples=-1"], "msaa_samples"),
+    (["--render-set", "msaa_samples"], "--render-set"),
 ])
 def test_bad_input_is_one_line_exit_2_nothing_written(args, words, tmp_path, capsys):
     out = tmp_path / "seq"
@@ -204,6 +222,6 @@ def test_preview_video_and_contact_sheet(tmp_path):
 
 
 def test_bench_sim_runs(capsys):
-    assert main(["bench", "sim", "--quiet", "--frames", "2", "--sizes", SMALL]) == 0
+    assert main(["bench", "sim", "--quiet", "--frames", "2", "--sizes", SMALL, "--render-set", "msaa_samples=0"]) == 0
     table = capsys.readouterr().out
-    assert "160x120" in table and "fps" in table
+    assert "160x120" in table and "fps" in table and "msaa_samples 0" in table
