@@ -143,6 +143,8 @@ class System:
 
         if not self.initialized:
             ok = self._initialize(frame, T_pred)
+            if not ok:  # too few static points with depth to begin a map: lost, at the motion prior
+                frame.T_c_w = T_pred
             state = ("init" if self.map.segment == 0 else "new_segment") if ok else "lost"
             keyframe = ok
             n_inliers = len(self.map.keyframes[self.ref_kf_id].matched()) if ok else 0

@@ -74,6 +74,20 @@ def test_black_stretch_is_flagged_lost_then_relocalized():
 
 
 @needs_kitti
+def test_frames_before_the_map_begins_are_lost_at_identity():
+    """A sequence whose first frames cannot begin a map (black: no features) reports them lost at the identity
+    pose, the world frame, and begins the map on the first frame that can (no exception)."""
+    seq = open_sequence(KITTI06)
+    system = System(load_config(None, ["mode=static"]), seq.camera)
+    estimates = [system.process(d) for d in _frames(seq, range(8), black={0, 1, 2})]
+    assert [e.state for e in estimates] == ["lost"] * 3 + ["init"] + ["ok"] * 4
+    assert all(np.array_equal(e.T_w_c, np.eye(4)) for e in estimates[:4])
+    # Frames 4-7 relative to the map's first frame, as the ground truth has them.
+    gt_rel = [np.linalg.inv(seq.gt_T_w_c[3]) @ seq.gt_T_w_c[e.index] for e in estimates[4:]]
+    assert max(np.linalg.norm(e.T_w_c[:3, 3] - g[:3, 3]) for e, g in zip(estimates[4:], gt_rel)) < 0.1
+
+
+@needs_kitti
 def test_jump_starts_a_new_segment_from_the_motion_prior():
     """Frames 0-11 then 35-45: relocalization against the old map fails, so after the configured
     number of lost frames a new map segment starts (no exception, poses stay finite)."""
