@@ -146,9 +146,14 @@ def main() -> None:
             for gid, frame, old_id, new_id in r["dynamic"].get("u_switches", []):
                 print(f"  unoccluded id switch: {scenario} seed {seed}, GT track {gid} at frame {frame}: "
                       f"estimated track {old_id} -> {new_id}")
+    print("ego ATE means over sequences: " + ", ".join(f"{m} {np.mean([r[m]['ate'] for _, _, r in rows]):.4f} m"
+                                                      for m in modes))
     if {"masked", "dynamic"} <= set(modes):
         better = sum(r["dynamic"]["ate"] <= r["masked"]["ate"] for _, _, r in rows)
-        print(f"dynamic ego ATE <= masked on {better}/{len(rows)} sequences")
+        diff = np.array([r["dynamic"]["ate"] - r["masked"]["ate"] for _, _, r in rows]) * 1e3
+        se = f", standard error {diff.std(ddof=1) / np.sqrt(len(diff)):.1f} mm" if len(diff) > 1 else ""
+        print(f"dynamic ego ATE <= masked on {better}/{len(rows)} sequences; paired difference dynamic - masked "
+              f"{diff.mean():+.1f} mm{se}")
     if {"static", "dynamic"} <= set(modes):
         ratio = [r["dynamic"]["ate"] / r["static"]["ate"] for _, _, r in rows]
         print("dynamic/static ego ATE: " + ", ".join(f"{s}{k}: {x:.2f}" for (s, k, _), x in zip(rows, ratio)))
