@@ -24,6 +24,8 @@ def run_sequence(seq_path, mode: str, out, config_path=None, overrides=(), overw
     config = load_config(config_path, list(overrides) + [f"mode={mode}"])
     sequence = open_sequence(seq_path)
     system = System(config, sequence.camera)
+    if len(sequence):
+        system.frontend.check(sequence[0])  # a sequence this mode cannot run: one error, nothing written
     with ResultsWriter(out, overwrite=overwrite) as writer:
         bar = tqdm(total=len(sequence), desc=f"run {mode}", unit="frame", disable=not progress)
         total_ms = 0.0

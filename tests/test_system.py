@@ -161,20 +161,30 @@ def _tiny_kitti(root: Path, right_width: int = 64, calib_value: str = "100.0") -
     return root
 
 
-@pytest.mark.parametrize("case", ["missing", "sizes", "nan_calib", "bad_set"])
-def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, case):
+@pytest.mark.parametrize("case, words", [("missing", "seq"), ("sizes", "right image"), ("nan_calib", "calib"),
+                                         ("bad_set", "no_such_key"), ("masked", "instance masks"),
+                                         ("dynamic", "instance masks"), ("depth_image", "use_depth_image")])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, case, words):
+    """Including a mode or setting the sequence cannot serve (KITTI odometry has no instance masks and no depth
+    images): one error line naming what is missing, and no results folder."""
     seq = tmp_path / "seq"
-    args = []
+    mode, args = "static", []
     if case == "sizes":
         _tiny_kitti(seq, right_width=80)
     elif case == "nan_calib":
         _tiny_kitti(seq, calib_value="nan")
-    elif case == "bad_set":
+    elif case != "missing":
         _tiny_kitti(seq)
+    if case == "bad_set":
         args = ["--set", "tracking.no_such_key=1"]
-    code = main(["run", str(seq), "--mode", "static", "--out", str(tmp_path / "res"), "--quiet", *args])
+    elif case in ("masked", "dynamic"):
+        mode = case
+    elif case == "depth_image":
+        args = ["--set", "tracking.use_depth_image=true"]
+    code = main(["run", str(seq), "--mode", mode, "--out", str(tmp_path / "res"), "--quiet", *args])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and err[0].startswith("dynaslam2 run: error:")
+    assert code == 2 and len(err) == 1 and err[0].startswith("dynaslam2 run: error:") and words in err[0], err
+    assert not (tmp_path / "res").exists()
 
 
 @needs_kitti

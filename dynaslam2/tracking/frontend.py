@@ -51,7 +51,9 @@ class FrameBuilder:
         self.th_depth = config.stereo.th_depth_baselines * camera.baseline
         self.n_features_right = max(1, round(config.stereo.right_features_factor * config.orb.n_features))
 
-    def _check(self, data: FrameData) -> None:
+    def check(self, data: FrameData) -> None:
+        """InputError naming what `data` lacks for this camera and mode: image sizes, a right or depth image, the
+        instance masks of `masked` and `dynamic`, the depth image of tracking.use_depth_image."""
         shape = (self.camera.height, self.camera.width)
         if data.left.shape[:2] != shape:
             raise InputError(f"frame {data.index}: left image is {data.left.shape[1]}x{data.left.shape[0]}, "
@@ -63,6 +65,12 @@ class FrameBuilder:
                                  f"expected {shape[1]}x{shape[0]} like the left image")
         if data.right is None and data.depth is None:
             raise InputError(f"frame {data.index}: needs a right image or a depth image")
+        if self.config.mode in ("masked", "dynamic") and data.instances is None:
+            raise InputError(f"frame {data.index}: mode '{self.config.mode}' needs instance masks (instances/), "
+                             "which this sequence lacks; mode 'static' needs none")
+        if self.config.tracking.use_depth_image and data.depth is None:
+            raise InputError(f"frame {data.index}: tracking.use_depth_image is set but the frame has no depth image "
+                             "(depth/)")
 
     def _row_search(self, kp, on_objects: np.ndarray, pyr_l, pyr_r, u_right: np.ndarray, depth: np.ndarray,
                     instances: np.ndarray | None) -> None:
@@ -116,7 +124,7 @@ class FrameBuilder:
 
     def build(self, data: FrameData, timing_ms: dict[str, float]) -> Frame:
         """Extract and match features of `data`; adds `features` and `stereo` to `timing_ms`."""
-        self._check(data)
+        self.check(data)
         mode = self.config.mode
         t0 = time.perf_counter()
         objects_px = dyn = None
