@@ -4,6 +4,7 @@ determinism, masked vs static on a simulated dynamic scene, and bad input."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 import types
 from pathlib import Path
@@ -13,6 +14,7 @@ import pytest
 
 from dynaslam2.cli import main
 from dynaslam2.config import load_config
+from dynaslam2.config_tree import to_dict
 from dynaslam2.eval.report import evaluate
 from dynaslam2.io.results import read_results
 from dynaslam2.io.sequence import open_sequence
@@ -185,6 +187,32 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, case, words):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and err[0].startswith("dynaslam2 run: error:") and words in err[0], err
     assert not (tmp_path / "res").exists()
+
+
+def test_run_records_what_made_the_results_and_eval_refuses_another_sequences(tmp_path, capsys):
+    """RES/run.json holds the mode, the whole config and the sequence's fingerprint (equal for a copy of the
+    sequence, not for one with other timestamps); eval of those results against another sequence of the same
+    length is one error line naming both, instead of scores against the wrong ground truth."""
+    seq_a, seq_b = _tiny_kitti(tmp_path / "a"), _tiny_kitti(tmp_path / "b")
+    (seq_b / "times.txt").write_text("0.0\n0.05\n0.1\n")
+    for seq in (seq_a, seq_b):
+        (seq / "poses.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n" * 3)
+    shutil.copytree(seq_a, tmp_path / "a_copy")
+    res = tmp_path / "res"
+    assert main(["run", str(seq_a), "--mode", "static", "--out", str(res), "--quiet", "--set", "orb.n_features=500"]) == 0
+    run = json.loads((res / "run.json").read_text())
+    assert run["mode"] == "static" and run["sequence"] == str(seq_a.resolve())
+    assert run["config"] == to_dict(load_config(None, ["orb.n_features=500", "mode=static"]))
+    fingerprint = open_sequence(seq_a).fingerprint()
+    assert run["sequence_fingerprint"] == fingerprint == open_sequence(tmp_path / "a_copy").fingerprint()
+    assert open_sequence(seq_b).fingerprint() != fingerprint
+    assert main(["eval", str(tmp_path / "a_copy"), str(res), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(seq_b), str(res), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds results of" in err[0] and str(seq_b) in err[0], err
+    (res / "run.json").unlink()  # results written before run.json existed are scored as before
+    assert main(["eval", str(seq_b), str(res), "--quiet"]) == 0
 
 
 @needs_kitti

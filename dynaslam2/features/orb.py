@@ -499,16 +499,19 @@ def _serve() -> None:
     requests, replies = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)
     sys.stdout = sys.stderr
-    pickle.dump((True, None), replies)  # started (`_Worker.ready`)
-    replies.flush()
-    while True:
-        try:
-            fn, args = pickle.load(requests)
-        except EOFError:
-            return
-        try:
-            reply = (True, fn(*args))
-        except Exception as exc:  # noqa: BLE001 - handed to the caller
-            reply = (False, exc)
-        pickle.dump(reply, replies, protocol=pickle.HIGHEST_PROTOCOL)
+    try:
+        pickle.dump((True, None), replies)  # started (`_Worker.ready`)
         replies.flush()
+        while True:
+            try:
+                fn, args = pickle.load(requests)
+            except EOFError:
+                return
+            try:
+                reply = (True, fn(*args))
+            except Exception as exc:  # noqa: BLE001 - handed to the caller
+                reply = (False, exc)
+            pickle.dump(reply, replies, protocol=pickle.HIGHEST_PROTOCOL)
+            replies.flush()
+    except BrokenPipeError:  # the parent is gone (a short run may end before the worker has started): no one to tell
+        os._exit(0)

@@ -10,6 +10,8 @@ With `write_objects` (the `dynamic` mode), per frame also
   without objects. It is appended after the frame's tracks.txt lines, so a frame present in
   objects.jsonl has all of its tracks.txt lines.
 Each line is flushed as it is written, so a crash keeps every complete frame readable.
+`run.json` (written once, atomically, before the first frame) records what made the results: mode, the whole
+SLAM config, the sequence's path and `Sequence.fingerprint`, and the package versions.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 
 from dynaslam2.classes import KITTI_TYPES
 from dynaslam2.errors import InputError
-from dynaslam2.io.atomic import AppendLog
+from dynaslam2.io.atomic import AppendLog, write_text_atomic
 from dynaslam2.io.kitti import TrackingLabel, format_pose_line, format_tracking_label, object_to_label, read_poses
 from dynaslam2.io.types import ObjectEstimate, ObjectState
 
@@ -34,8 +36,9 @@ TIMING_FILE = "timing.csv"
 OBJECTS_FILE = "objects.jsonl"
 TRACKS_FILE = "tracks.txt"
 METRICS_FILE = "metrics.json"
+RUN_FILE = "run.json"
 # Every file a run or an eval writes into RES/: `overwrite=True` removes these and nothing else.
-RESULT_FILES = (POSES_FILE, STATUS_FILE, TIMING_FILE, OBJECTS_FILE, TRACKS_FILE, METRICS_FILE)
+RESULT_FILES = (POSES_FILE, STATUS_FILE, TIMING_FILE, OBJECTS_FILE, TRACKS_FILE, METRICS_FILE, RUN_FILE)
 # KITTI's value for an orientation (alpha, rotation_y) that was not estimated.
 KITTI_UNKNOWN_ANGLE = -10.0
 
@@ -148,8 +151,11 @@ def _estimate_from_record(record: dict) -> ObjectEstimate:
 class ResultsWriter:
     """Appends one frame at a time to the result files of a run folder (frames 0, 1, 2, ... in order)."""
 
-    def __init__(self, out_dir: str | os.PathLike, overwrite: bool = False):
+    def __init__(self, out_dir: str | os.PathLike, overwrite: bool = False, run_info: dict | None = None):
+        """`run_info`: written to run.json (what made the results) before any frame."""
         self.out_dir = prepare_results_dir(out_dir, overwrite)
+        if run_info is not None:
+            write_text_atomic(self.out_dir / RUN_FILE, json.dumps(run_info, indent=2, default=_json_default) + "\n")
         self.frames = 0
         self._poses = AppendLog(self.out_dir / POSES_FILE)
         self._status = AppendLog(self.out_dir / STATUS_FILE)
@@ -232,14 +238,16 @@ class ResultsWriter:
 @dataclass
 class Results:
     """A run's results: T_w_c (N, 4, 4), status (N dicts), timing (stage name -> (N,) ms, from timing.csv),
-    objects (N lists of ObjectEstimate, from objects.jsonl; empty lists when the run wrote none) and
-    has_objects (objects.jsonl exists: a `dynamic` run, even one that tracked nothing)."""
+    objects (N lists of ObjectEstimate, from objects.jsonl; empty lists when the run wrote none),
+    has_objects (objects.jsonl exists: a `dynamic` run, even one that tracked nothing) and run (run.json, or None
+    for results written before it existed)."""
 
     T_w_c: np.ndarray
     status: list[dict]
     timing: dict[str, np.ndarray]
     objects: list[list[ObjectEstimate]] = field(default_factory=list)
     has_objects: bool = False
+    run: dict | None = None
 
     def __len__(self) -> int:
         return len(self.T_w_c)
@@ -333,4 +341,18 @@ def read_results(res_dir: str | os.PathLike) -> Results:
         raise InputError(f"results in {res} disagree on the number of frames: "
                          + ", ".join(f"{k} {v}" for k, v in counts.items()))
     return Results(T_w_c=T_w_c[:n], status=status[:n], timing={k: v[:n] for k, v in timing.items()},
-                   objects=objects[:n] if has_objects else [[] for _ in range(n)], has_objects=has_objects)
+                   objects=objects[:n] if has_objects else [[] for _ in range(n)], has_objects=has_objects,
+                   run=_read_run(res / RUN_FILE))
+
+
+def _read_run(path: Path) -> dict | None:
+    """run.json, or None where the folder has none; InputError where it is not a JSON object."""
+    if not path.is_file():
+        return None
+    try:
+        run = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: unreadable run record ({exc})") from None
+    if not isinstance(run, dict):
+        raise InputError(f"{path}: expected a JSON object")
+    return run

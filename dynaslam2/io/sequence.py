@@ -7,7 +7,9 @@ log lines of their frame, and every log line is flushed whole, so a crash leaves
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
+import hashlib
 import json
 import os
 import shutil
@@ -390,6 +392,17 @@ class Sequence:
                 box2d=label.box2d, extra={"kitti_truncated": label.truncated},
             ))
         return objects
+
+    def fingerprint(self) -> str:
+        """16 hex digits identifying what the sequence's ground truth depends on: its kind, camera, timestamps and,
+        for a simulated one, the world version, scenario and seed (not the frames' bytes, not the rendering
+        settings). `dynaslam2 run` records it in RES/run.json; `dynaslam2 eval` refuses another sequence's results."""
+        sim = {k: self.meta.get(k) for k in ("scenario", "seed")}
+        sim["world"] = self.meta.get("versions", {}).get("sim_world")
+        head = json.dumps([self.kind, dataclasses.astuple(self.camera), sim], sort_keys=True, default=str)
+        digest = hashlib.sha256(head.encode())
+        digest.update(np.round(np.asarray(self.timestamps, dtype=np.float64), 6).tobytes())
+        return digest.hexdigest()[:16]
 
     def __repr__(self) -> str:
         c = self.camera
