@@ -1,4 +1,4 @@
-"""The `dynaslam2` command: simulate, run, eval, demo, bench.
+"""The `dynaslam2` command: simulate, run, eval, demo, sweep, bench.
 
 This is the one module that ties `dynaslam2`, `sim` and `envs` together; it imports `sim` lazily,
 inside the subcommands that need it, so the SLAM library never depends on MuJoCo.
@@ -107,6 +107,25 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from dynaslam2.sweep import SUMMARY_FILE, SweepSpec, format_summary, parse_grid, run_sweep
+
+    sim_overrides = list(args.overrides)
+    if args.frames is not None:
+        sim_overrides.append(f"frames={args.frames}")
+    if args.size is not None:
+        sim_overrides.append(f"image_size={args.size}")
+    spec = SweepSpec(scenario=args.scenario, grid=parse_grid(args.grid), seeds=args.seeds, modes=list(args.modes),
+                     sim_overrides=sim_overrides, slam_overrides=list(args.slam_overrides))
+    rows = run_sweep(spec, args.out, backend=args.backend, jobs=args.jobs, progress=not args.quiet)
+    print(format_summary(spec, rows))
+    failed = [r for r in rows if r["status"] != "ok"]
+    print(f"sweep: {len(rows) - len(failed)} of {len(rows)} runs scored; {Path(args.out) / SUMMARY_FILE}")
+    for r in failed:
+        print(f"sweep: {r['job']} {r['mode']}: {r['status']}", file=sys.stderr)
+    return 1 if failed else 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.target == "sim":
         from sim.bench import bench_sim
@@ -174,6 +193,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", default=None, metavar="FILE", help="write the metrics here instead of RES/metrics.json")
     p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("sweep", help="simulate a grid of scenarios x seeds, run the modes, score and tabulate",
+                       description="Every grid point (scenario fields, or SLAM config keys prefixed slam.) is "
+                                   "simulated for seeds 0..N-1, run in each mode and scored; OUT/summary.csv has a row "
+                                   "per run. Runs in parallel on local processes or Ray; a rerun resumes.")
+    p.add_argument("--scenario", default="traffic",
+                   help="built-in scenario (static, traffic, crossing, following) or a YAML file (default: traffic)")
+    p.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2,...",
+                   help="a swept key and its values, e.g. --grid object_speed=0.5,1,2 or --grid "
+                        "slam.objects.ba=true,false (repeatable: the grid is their product)")
+    p.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 per grid point (default 1)")
+    p.add_argument("--modes", nargs="+", default=["dynamic", "masked", "static"],
+                   choices=["dynamic", "masked", "static"], help="SLAM modes to run (default: all three)")
+    p.add_argument("--out", required=True, metavar="DIR", help="sweep folder (a rerun into it resumes)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local",
+                   help="local processes, or Ray tasks (a cluster when RAY_ADDRESS is set; DIR on shared storage)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="local: sequences processed at once (each takes about two cores; default 1)")
+    p.add_argument("--frames", type=int, default=None, help="frames per sequence")
+    p.add_argument("--size", default=None, metavar="WxH", help="image size, e.g. 640x480")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="a scenario field fixed for every run (repeatable)")
+    p.add_argument("--slam-set", dest="slam_overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="a SLAM config value fixed for every run (repeatable)")
+    p.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("bench", help="performance benchmarks",
                        description="Measure throughput; figures are medians over the frames.")
