@@ -7,7 +7,7 @@ import pytest
 from dynaslam2.cli import DEMO_MODE, main
 
 
-@pytest.mark.parametrize("command", ["simulate", "run", "eval", "demo", "bench"])
+@pytest.mark.parametrize("command", ["simulate", "run", "eval", "demo", "sweep", "bench"])
 def test_every_subcommand_explains_itself(command, capsys):
     with pytest.raises(SystemExit) as exc:
         main([command, "--help"])
