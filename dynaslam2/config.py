@@ -746,6 +746,16 @@ class ObjectsConfig:
     # 40-54 21 -> 23 (0 -> 0; s51: two tracks of one pedestrian, each refused it for the other's closer gallery);
     # every other figure of seeds 0-4, 5-9, 10-14, 15-19, 20-24, crossing 40-54 and 55-69 unchanged.
     appearance_margin: float = 0.2
+    # The margin rule in the box stages too (box joins keep the absolute test only when off): an instance that lies
+    # appearance_margin closer to another active track's gallery is no box candidate of the track (a look-alike's
+    # track lost beyond the join window still counts, and the appearance stage then re-identifies it). Crossing s126
+    # f103 (world 4): a person's track coasting on a sliver took by its box the instance of its neighbour 10 px away
+    # (0.39 from its gallery, 0.06 from the neighbour's lost track's) while its own person got a new track: two
+    # unoccluded id switches (f105, f109). Measured (world 4, 316ee79's code otherwise): crossing s126 4 switches (2
+    # unoccluded) -> 0, s110 3 (1) -> 1 (0), object ATE 0.184 -> 0.186 and 0.168 -> 0.167 m; s72 and s99 (other
+    # causes) unchanged; crossing 40-54 identical (0.230 m, 81.0 %, 12 switches, 99 of 101 gaps), 55-69 0.260 ->
+    # 0.256 m, TP 80.4 -> 80.3 %, 21 switches and 91 of 92 gaps either way. Off until every group is rerun with it.
+    appearance_margin_box_joins: bool = False
     # DeepSORT's appearance cascade for lost tracks: an instance that no earlier stage took joins the person's track
     # lost within max_lost_s whose gallery lies within appearance_reid_distance of its histogram (Hungarian on the
     # distance) and whose predicted box centre gates it (box_gate_chi2); the track is re-anchored on the instance

@@ -1573,6 +1573,36 @@ def test_a_track_does_not_take_an_instance_that_looks_like_another_track_more(ma
     assert ids == ({2002: track_of[2001]} if margin == 0 else {2002: track_of[2002]})
 
 
+@pytest.mark.parametrize("in_box_joins", [False, True])
+def test_a_box_join_does_not_take_an_instance_that_looks_like_another_track_more(in_box_joins):
+    """The two look-alike pedestrians above (shirts alike, trousers not: 0.32 apart); the blue one is hidden for
+    1 s, beyond the box join window but not beyond max_lost_s (its gallery still counts), then comes out, with new
+    descriptors, where the red one's track predicts the red one, which is hidden at that frame (crossing s126 f103:
+    a person's coasting track took by its box the instance of its neighbour, 10 px away, whose own track was lost).
+    The box stages judge only the absolute distance (0.32 < appearance_max_distance): the red track takes the blue
+    instance. With objects.appearance_margin_box_joins the margin rule of the claims and votes holds there too: the
+    red track does not take it and the blue track re-identifies it by appearance."""
+    rng = np.random.default_rng(5)
+    dims = (0.5, 1.7, 0.4)
+    red, blue = Body(rng, 2001, 60, dims), Body(rng, 2002, 60, dims)
+    at = [[make_pose(np.eye(3), np.array([x + 0.05 * i, 0.6, 12.0])) for i in range(16)] for x in (-0.3, 0.0)]
+    shirt = (90, 90, 90)
+    colours = {2001: [(shirt, 0.9), ((200, 30, 30), 0.1)], 2002: [(shirt, 0.9), ((30, 30, 200), 0.1)]}
+    objects = ObjectMap()
+    trk = tracker("objects.appearance_max_distance=0.4", "objects.appearance_margin=0.2",
+                  f"objects.appearance_margin_box_joins={in_box_joins}")
+    for i in range(15):
+        frame = make_frame(i, [(red, at[0][i])] + ([(blue, at[1][i])] if i < 5 else []))
+        instances, image = painted(frame, colours)
+        estimates = trk.track(frame, instances, objects, image).estimates
+        if i == 4:
+            track_of = {e.instance_id: e.track_id for e in estimates}
+    frame = make_frame(15, [(blue.part(np.arange(60), rng=rng), at[0][15])])
+    instances, image = painted(frame, colours)
+    ids = {e.instance_id: e.track_id for e in trk.track(frame, instances, objects, image).estimates}
+    assert ids == ({2002: track_of[2002]} if in_box_joins else {2002: track_of[2001]})
+
+
 def test_a_confirmed_track_gets_its_box_before_a_tentative_one():
     """A car tracked for 0.5 s is hidden for 0.2 s and speeds up: it re-emerges 2.3 m ahead of its prediction, its
     front 40 % in view, and gets a new, tentative track (no box of its old one reaches it). A frame later it is in

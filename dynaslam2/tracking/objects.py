@@ -349,7 +349,9 @@ class ObjectTracker:
             classes = [_instance_class(int(inst_ids[k])) for k in ks]
             return dict(zip(ks, self.boxes.assign(
                 frame, objects, tracks, pred, boxes[ks], classes,
-                [points[k][1] for k in ks], None if looks is None else {tid: d[ks] for tid, d in looks.items()},
+                [points[k][1] for k in ks], None if looks is None else {
+                    tid: np.where(cfg.appearance_margin_box_joins & np.isin(inst_ids[ks], list(foreign[tid])),
+                                  np.inf, d[ks]) for tid, d in looks.items()},
                 np.array([max_gap_s if enough[k] else cfg.pedestrian_coast_max_s if cls == "pedestrian"
                           else cfg.coast_max_s for k, cls in zip(ks, classes)]),
                 np.array([not enough[k] for k in ks], dtype=bool), stages)))
