@@ -263,16 +263,16 @@ def format_summary(spec: SweepSpec, rows: list[dict]) -> str:
     for row in rows:
         groups.setdefault((*(row.get(k) for k in spec.grid), row["mode"]), []).append(row)
     head = [*spec.grid, "mode", "ok", "ego ATE m", "obj ATE m", "obj TP"]
+
+    def mean(ok: list[dict], metric: str) -> str:
+        vals = [float(r[metric]) for r in ok if r.get(metric) not in ("", None)]
+        return f"{sum(vals) / len(vals):.4f}" if vals else "-"
+
     lines = []
     for key, group in groups.items():
         ok = [r for r in group if r["status"] == "ok"]
-
-        def mean(metric: str) -> str:
-            vals = [float(r[metric]) for r in ok if r.get(metric) not in ("", None)]
-            return f"{sum(vals) / len(vals):.4f}" if vals else "-"
-
-        lines.append([*map(str, key), f"{len(ok)}/{len(group)}", mean("ego.ate_rmse_m"), mean("objects.ate_rmse_m"),
-                      mean("objects.tp_ratio")])
+        lines.append([*map(str, key), f"{len(ok)}/{len(group)}",
+                      *(mean(ok, m) for m in ("ego.ate_rmse_m", "objects.ate_rmse_m", "objects.tp_ratio"))])
     widths = [max(len(str(c)) for c in col) for col in zip(head, *lines)]
     return "\n".join("  ".join(f"{c:>{w}}" for c, w in zip(line, widths)) for line in [head, *lines])
 

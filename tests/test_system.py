@@ -199,7 +199,8 @@ def test_run_records_what_made_the_results_and_eval_refuses_another_sequences(tm
         (seq / "poses.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n" * 3)
     shutil.copytree(seq_a, tmp_path / "a_copy")
     res = tmp_path / "res"
-    assert main(["run", str(seq_a), "--mode", "static", "--out", str(res), "--quiet", "--set", "orb.n_features=500"]) == 0
+    assert main(["run", str(seq_a), "--mode", "static", "--out", str(res), "--quiet",
+                 "--set", "orb.n_features=500"]) == 0
     run = json.loads((res / "run.json").read_text())
     assert run["mode"] == "static" and run["sequence"] == str(seq_a.resolve())
     assert run["config"] == to_dict(load_config(None, ["orb.n_features=500", "mode=static"]))
