@@ -752,7 +752,8 @@ class ObjectsConfig:
     # f103 (world 4): a person's track coasting on a sliver took by its box the instance of its neighbour 10 px away
     # (0.39 from its gallery, 0.06 from the neighbour's lost track's) while its own person got a new track: two
     # unoccluded id switches (f105, f109). Measured (world 4, 316ee79's code otherwise): crossing s126 4 switches (2
-    # unoccluded) -> 0, s110 3 (1) -> 1 (0), object ATE 0.184 -> 0.186 and 0.168 -> 0.167 m; s72 and s99 (other
+    # unoccluded) -> 0, s110 3 (1) -> 1 (0), s6 2 (1) -> 0 (a swap of two people at f129), object ATE 0.184 ->
+    # 0.186, 0.168 -> 0.167 and 0.215 -> 0.217 m: four of world 4's six unoccluded switches; s72 and s99 (other
     # causes) unchanged; crossing 40-54 identical (0.230 m, 81.0 %, 12 switches, 99 of 101 gaps), 55-69 0.260 ->
     # 0.256 m, TP 80.4 -> 80.3 %, 21 switches and 91 of 92 gaps either way. Off until every group is rerun with it.
     appearance_margin_box_joins: bool = False
