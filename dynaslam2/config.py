@@ -755,7 +755,9 @@ class ObjectsConfig:
     # unoccluded) -> 0, s110 3 (1) -> 1 (0), s6 2 (1) -> 0 (a swap of two people at f129), object ATE 0.184 ->
     # 0.186, 0.168 -> 0.167 and 0.215 -> 0.217 m: four of world 4's six unoccluded switches; s72 and s99 (other
     # causes) unchanged; crossing 40-54 identical (0.230 m, 81.0 %, 12 switches, 99 of 101 gaps), 55-69 0.260 ->
-    # 0.256 m, TP 80.4 -> 80.3 %, 21 switches and 91 of 92 gaps either way. Off until every group is rerun with it.
+    # 0.256 m, TP 80.4 -> 80.3 %, 21 switches and 91 of 92 gaps either way; 100-114 0.231 m, 83.1 % and 131 of 133
+    # either way, switches 11 (1 unoccluded) -> 8 (0); 115-129 0.221 m and 105 of 107 either way, TP 81.8 -> 81.9 %,
+    # switches 14 (2) -> 10 (0). Off until every group is rerun with it.
     appearance_margin_box_joins: bool = False
     # DeepSORT's appearance cascade for lost tracks: an instance that no earlier stage took joins the person's track
     # lost within max_lost_s whose gallery lies within appearance_reid_distance of its histogram (Hungarian on the
