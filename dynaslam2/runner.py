@@ -5,25 +5,21 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-import cv2
-import numpy as np
 from tqdm import tqdm
 
-from dynaslam2 import __version__
 from dynaslam2.config import load_config
 from dynaslam2.config_tree import to_dict
 from dynaslam2.io.results import ResultsWriter
 from dynaslam2.io.sequence import open_sequence
 from dynaslam2.system import System
+from dynaslam2.versions import package_versions
 
 
-def package_versions() -> dict[str, str]:
-    """Versions of the packages that shape the estimates."""
+def _gtsam_version() -> str:
     try:
-        gtsam_version = version("gtsam")
+        return version("gtsam")
     except PackageNotFoundError:  # built from source without package metadata
-        gtsam_version = "unknown"
-    return {"dynaslam2": __version__, "numpy": np.__version__, "opencv": cv2.__version__, "gtsam": gtsam_version}
+        return "unknown"
 
 
 def run_sequence(seq_path, mode: str, out, config_path=None, overrides=(), overwrite: bool = False,
@@ -42,7 +38,7 @@ def run_sequence(seq_path, mode: str, out, config_path=None, overrides=(), overw
         system.frontend.check(sequence[0])  # a sequence this mode cannot run: one error, nothing written
     run_info = {"mode": mode, "sequence": str(Path(seq_path).resolve()),
                 "sequence_fingerprint": sequence.fingerprint(), "config": to_dict(config),
-                "versions": package_versions()}
+                "versions": package_versions(gtsam=_gtsam_version())}
     with ResultsWriter(out, overwrite=overwrite, run_info=run_info) as writer:
         bar = tqdm(total=len(sequence), desc=f"run {mode}", unit="frame", disable=not progress)
         total_ms = 0.0

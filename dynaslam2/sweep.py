@@ -70,7 +70,7 @@ class Job:
     name: str  # <scenario>[_<point>]_s<seed>
     scenario: str
     seed: int
-    sim_overrides: list[str]  # seed included
+    sim_overrides: list[str]  # the seed is `seed`
     values: dict[str, str]  # the scenario grid values of this job
     slam_points: list[SlamPoint]
     modes: list[str]
@@ -130,8 +130,8 @@ def plan(spec: SweepSpec) -> list[Job]:
         overrides = spec.sim_overrides + [f"{k}={v}" for k, v in point]
         load_scenario(spec.scenario, overrides)
         tag = "_".join(filter(None, [scenario_tag, _slug(point)]))
-        jobs += [Job(f"{tag}_s{seed}", spec.scenario, seed, overrides + [f"seed={seed}"], dict(point), slam_points,
-                     list(spec.modes)) for seed in range(spec.seeds)]
+        jobs += [Job(f"{tag}_s{seed}", spec.scenario, seed, overrides, dict(point), slam_points, list(spec.modes))
+                 for seed in range(spec.seeds)]
     return jobs
 
 
@@ -155,7 +155,8 @@ def run_job(job: Job, out: str) -> list[dict]:
     try:
         meta = seq / "meta.json"
         if not (meta.is_file() and json.loads(meta.read_text()).get("complete")):
-            generate_sequence(load_scenario(job.scenario, job.sim_overrides), seq, overwrite=True, progress=False)
+            generate_sequence(load_scenario(job.scenario, [*job.sim_overrides, f"seed={job.seed}"]), seq,
+                              overwrite=True, progress=False)
         sim_error = None
     except Exception as exc:  # noqa: BLE001 - recorded in the summary, the sweep goes on
         sim_error = _error_line(exc)

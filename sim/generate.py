@@ -20,6 +20,7 @@ from dynaslam2.errors import InputError
 from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.io.sequence import SequenceWriter
 from dynaslam2.io.types import FrameData
+from dynaslam2.versions import package_versions
 from sim.groundtruth import GroundTruth, GroundTruthConfig
 from sim.render import RenderConfig, StereoRenderer
 from sim.scenarios import ScenarioConfig
@@ -40,16 +41,13 @@ class GenerationStats:
         self.stage_ms.setdefault(stage, []).append(ms)
 
 
-def package_versions() -> dict[str, str]:
-    """Versions of the packages (and of the sim world) that determine the output bytes."""
-    import cv2
+def sim_versions() -> dict[str, str]:
+    """Versions of the packages and of the sim world that determine the output bytes."""
     import mujoco
 
-    import dynaslam2
     from sim.world import WORLD_VERSION
 
-    return {"dynaslam2": dynaslam2.__version__, "mujoco": mujoco.__version__, "numpy": np.__version__,
-            "opencv": cv2.__version__, "sim_world": str(WORLD_VERSION)}
+    return package_versions(mujoco=mujoco.__version__, sim_world=str(WORLD_VERSION))
 
 
 def sequence_meta(cfg: ScenarioConfig, render_cfg: RenderConfig, gt_cfg: GroundTruthConfig) -> dict:
@@ -62,7 +60,7 @@ def sequence_meta(cfg: ScenarioConfig, render_cfg: RenderConfig, gt_cfg: GroundT
         "image_size": [int(v) for v in cfg.image_size],
         "render": to_dict(render_cfg),
         "groundtruth": to_dict(gt_cfg),
-        "versions": package_versions(),
+        "versions": sim_versions(),
     }
 
 

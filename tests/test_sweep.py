@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 import dynaslam2.runner
+import sim.generate
 from dynaslam2.cli import main
 from dynaslam2.sweep import SUMMARY_FILE
 
@@ -53,9 +54,10 @@ def test_a_rerun_resumes_without_running_again(swept, monkeypatch):
     before = (swept / SUMMARY_FILE).read_text()
 
     def no_run(*args, **kwargs):
-        raise AssertionError("a finished run was run again")
+        raise AssertionError("a finished run or a complete sequence was made again")
 
     monkeypatch.setattr(dynaslam2.runner, "run_sequence", no_run)
+    monkeypatch.setattr(sim.generate, "generate_sequence", no_run)
     assert main([*BASE, *GRID, "--out", str(swept)]) == 0
     assert (swept / SUMMARY_FILE).read_text() == before
 

@@ -36,10 +36,10 @@ def evaluate(seq_path: str | os.PathLike, res_path: str | os.PathLike,
     seq_path, res_path = Path(seq_path), Path(res_path)
     results = read_results(res_path)
     seq = open_sequence(seq_path)
-    recorded = (results.run or {}).get("sequence_fingerprint")
-    if recorded is not None and recorded != seq.fingerprint():
+    recorded, fingerprint = (results.run or {}).get("sequence_fingerprint"), seq.fingerprint()
+    if recorded is not None and recorded != fingerprint:
         raise InputError(f"{res_path} holds results of {results.run.get('sequence', 'another sequence')}, not of "
-                         f"{seq_path} (run.json's sequence_fingerprint {recorded} differs from {seq.fingerprint()})")
+                         f"{seq_path} (run.json's sequence_fingerprint {recorded} differs from {fingerprint})")
     if seq.gt_T_w_c is None:
         raise InputError(f"no ground-truth trajectory in {seq_path}: expected {seq_path / 'poses.txt'}")
     T_gt = np.asarray(seq.gt_T_w_c, dtype=float)
