@@ -341,6 +341,9 @@ class ObjectTracker:
         open_k = [k for k, inst in enumerate(inst_ids.tolist()) if inst not in claimed]
         points = {k: self._instance_points(frame, int(inst_ids[k]), free) for k in open_k}
         enough = {k: len(points[k][0]) >= cfg.min_inliers for k in open_k}
+        # The box stages' gallery distances; with appearance_margin_box_joins the margin rule's instances are out.
+        box_looks = looks if looks is None or not cfg.appearance_margin_box_joins else {
+            tid: np.where(np.isin(inst_ids, list(foreign[tid])), np.inf, d) for tid, d in looks.items()}
 
         def assign(tracks: list[ObjectTrack], ks: list[int], max_gap_s: float, stages: tuple[str, ...]
                    ) -> dict[int, ObjectTrack | None]:
@@ -349,9 +352,7 @@ class ObjectTracker:
             classes = [_instance_class(int(inst_ids[k])) for k in ks]
             return dict(zip(ks, self.boxes.assign(
                 frame, objects, tracks, pred, boxes[ks], classes,
-                [points[k][1] for k in ks], None if looks is None else {
-                    tid: np.where(cfg.appearance_margin_box_joins & np.isin(inst_ids[ks], list(foreign[tid])),
-                                  np.inf, d[ks]) for tid, d in looks.items()},
+                [points[k][1] for k in ks], None if box_looks is None else {tid: d[ks] for tid, d in box_looks.items()},
                 np.array([max_gap_s if enough[k] else cfg.pedestrian_coast_max_s if cls == "pedestrian"
                           else cfg.coast_max_s for k, cls in zip(ks, classes)]),
                 np.array([not enough[k] for k in ks], dtype=bool), stages)))
