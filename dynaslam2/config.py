@@ -757,8 +757,11 @@ class ObjectsConfig:
     # causes) unchanged; crossing 40-54 identical (0.230 m, 81.0 %, 12 switches, 99 of 101 gaps), 55-69 0.260 ->
     # 0.256 m, TP 80.4 -> 80.3 %, 21 switches and 91 of 92 gaps either way; 100-114 0.231 m, 83.1 % and 131 of 133
     # either way, switches 11 (1 unoccluded) -> 8 (0); 115-129 0.221 m and 105 of 107 either way, TP 81.8 -> 81.9 %,
-    # switches 14 (2) -> 10 (0). Off until every group is rerun with it.
-    appearance_margin_box_joins: bool = False
+    # switches 14 (2) -> 10 (0). The other groups (seeds 0-14, fresh 15-39, following 10-39, crossing 70-99) rerun
+    # with it: identical but for s6 (above), crossing s39 (3 switches -> 0, object ATE 0.194 -> 0.187 m, ego ATE
+    # 0.016 -> 0.019 m) and crossing 70-84 (0.286 -> 0.287 m, TP 80.5 -> 80.6 %, switches 19 -> 17); short gaps
+    # unchanged everywhere. World 4 in all: unoccluded id switches 6 -> 2, id switches 125 -> 111. On by default since.
+    appearance_margin_box_joins: bool = True
     # DeepSORT's appearance cascade for lost tracks: an instance that no earlier stage took joins the person's track
     # lost within max_lost_s whose gallery lies within appearance_reid_distance of its histogram (Hungarian on the
     # distance) and whose predicted box centre gates it (box_gate_chi2); the track is re-anchored on the instance
