@@ -760,7 +760,8 @@ class ObjectsConfig:
     # switches 14 (2) -> 10 (0). The other groups (seeds 0-14, fresh 15-39, following 10-39, crossing 70-99) rerun
     # with it: identical but for s6 (above), crossing s39 (3 switches -> 0, object ATE 0.194 -> 0.187 m, ego ATE
     # 0.016 -> 0.019 m) and crossing 70-84 (0.286 -> 0.287 m, TP 80.5 -> 80.6 %, switches 19 -> 17); short gaps
-    # unchanged everywhere. World 4 in all: unoccluded id switches 6 -> 2, id switches 125 -> 111. On by default since.
+    # unchanged everywhere. World 4 in all: unoccluded id switches 6 -> 2, id switches 125 -> 111. On by default
+    # after these runs.
     appearance_margin_box_joins: bool = True
     # DeepSORT's appearance cascade for lost tracks: an instance that no earlier stage took joins the person's track
     # lost within max_lost_s whose gallery lies within appearance_reid_distance of its histogram (Hungarian on the

@@ -1579,9 +1579,9 @@ def test_a_box_join_does_not_take_an_instance_that_looks_like_another_track_more
     1 s, beyond the box join window but not beyond max_lost_s (its gallery still counts), then comes out, with new
     descriptors, where the red one's track predicts the red one, which is hidden at that frame (crossing s126 f103:
     a person's coasting track took by its box the instance of its neighbour, 10 px away, whose own track was lost).
-    The box stages judge only the absolute distance (0.32 < appearance_max_distance): the red track takes the blue
-    instance. With objects.appearance_margin_box_joins the margin rule of the claims and votes holds there too: the
-    red track does not take it and the blue track re-identifies it by appearance."""
+    With objects.appearance_margin_box_joins off the box stages judge only the absolute distance (0.32 <
+    appearance_max_distance): the red track takes the blue instance. On (the default) the margin rule of the claims
+    and votes holds there too: the red track does not take it and the blue track re-identifies it by appearance."""
     rng = np.random.default_rng(5)
     dims = (0.5, 1.7, 0.4)
     red, blue = Body(rng, 2001, 60, dims), Body(rng, 2002, 60, dims)
