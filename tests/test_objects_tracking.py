@@ -1546,18 +1546,26 @@ def test_instance_histograms_and_gallery_distance():
     assert gallery_distance(disjoint, [hist[1]])[0] == pytest.approx(1.0)
 
 
+def look_alike_pedestrians(frames: int):
+    """(rng, red, blue, at, colours): two pedestrians in one grey shirt, red (2001) and blue (2002) trousers (a
+    tenth of the body: 0.32 apart), side by side 0.3 m apart at 12 m, walking 0.05 m per frame; at[b][i] is body
+    b's pose at frame i < `frames`."""
+    rng = np.random.default_rng(5)
+    dims = (0.5, 1.7, 0.4)
+    red, blue = Body(rng, 2001, 60, dims), Body(rng, 2002, 60, dims)
+    at = [[make_pose(np.eye(3), np.array([x + 0.05 * i, 0.6, 12.0])) for i in range(frames)] for x in (-0.3, 0.0)]
+    shirt = (90, 90, 90)
+    colours = {2001: [(shirt, 0.9), ((200, 30, 30), 0.1)], 2002: [(shirt, 0.9), ((30, 30, 200), 0.1)]}
+    return rng, red, blue, at, colours
+
+
 @pytest.mark.parametrize("margin", [0.0, 0.2])
 def test_a_track_does_not_take_an_instance_that_looks_like_another_track_more(margin):
     """As above, but the two pedestrians share a shirt colour and differ in their trousers (a tenth of the box):
     0.32 apart, within appearance_max_distance (crossing s14 f121: two pedestrians in dark clothes 0.40-0.53
     apart). The blue-trousered instance lies 0.32 from the red-trousered track's gallery and 0 from its own
     track's: with appearance_margin 0.2 the red track does not take it; without, it hops."""
-    rng = np.random.default_rng(5)
-    dims = (0.5, 1.7, 0.4)
-    red, blue = Body(rng, 2001, 60, dims), Body(rng, 2002, 60, dims)
-    at = [[make_pose(np.eye(3), np.array([x + 0.05 * i, 0.6, 12.0])) for i in range(6)] for x in (-0.3, 0.0)]
-    shirt = (90, 90, 90)
-    colours = {2001: [(shirt, 0.9), ((200, 30, 30), 0.1)], 2002: [(shirt, 0.9), ((30, 30, 200), 0.1)]}
+    rng, red, blue, at, colours = look_alike_pedestrians(6)
     objects = ObjectMap()
     trk = tracker("objects.appearance_max_distance=0.4", f"objects.appearance_margin={margin}")
     for i in range(5):
@@ -1582,12 +1590,7 @@ def test_a_box_join_does_not_take_an_instance_that_looks_like_another_track_more
     With objects.appearance_margin_box_joins off the box stages judge only the absolute distance (0.32 <
     appearance_max_distance): the red track takes the blue instance. On (the default) the margin rule of the claims
     and votes holds there too: the red track does not take it and the blue track re-identifies it by appearance."""
-    rng = np.random.default_rng(5)
-    dims = (0.5, 1.7, 0.4)
-    red, blue = Body(rng, 2001, 60, dims), Body(rng, 2002, 60, dims)
-    at = [[make_pose(np.eye(3), np.array([x + 0.05 * i, 0.6, 12.0])) for i in range(16)] for x in (-0.3, 0.0)]
-    shirt = (90, 90, 90)
-    colours = {2001: [(shirt, 0.9), ((200, 30, 30), 0.1)], 2002: [(shirt, 0.9), ((30, 30, 200), 0.1)]}
+    rng, red, blue, at, colours = look_alike_pedestrians(16)
     objects = ObjectMap()
     trk = tracker("objects.appearance_max_distance=0.4", "objects.appearance_margin=0.2",
                   f"objects.appearance_margin_box_joins={in_box_joins}")
