@@ -1187,6 +1187,49 @@ def test_a_car_whose_last_seen_part_has_left_the_image_keeps_its_track_by_the_pa
     assert e7.track_id == e.track_id and list(objects.tracks) == [e.track_id]
 
 
+def mask_of_keypoints(frame: Frame, left_edge: bool) -> np.ndarray:
+    """An instance image holding each instance's keypoint box, from the left image border when `left_edge` (an
+    instance cut by it: its mask reaches the border, its keypoints need not)."""
+    instances = np.zeros((CAMERA.height, CAMERA.width), np.int64)
+    for inst in np.unique(frame.instance_id):
+        uv = frame.keypoints.uv[frame.instance_id == inst]
+        u0, v0 = (0, uv[:, 1].min()) if left_edge else uv.min(axis=0)
+        u1, v1 = uv.max(axis=0)
+        instances[int(v0):int(v1) + 1, int(u0):int(u1) + 1] = inst
+    return instances
+
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_a_car_gone_by_the_border_is_not_joined_by_its_last_box_to_the_next_one_there(rule):
+    """A car drives out by the left image border, last seen by its front (its rear hidden), its mask cut by the
+    border. Two frames later its front has left (the moved box is clipped from wholly outside the image) while its
+    3D extent is still in view, so the track stays a candidate; the 3-keypoint sliver of another car entering there
+    at 6 m lies inside its last box. With objects.border_exit_drops_last_box the last box of a track gone by the
+    border joins nothing (crossing s99 f77: a van gone by the left border took the van entering there, an
+    unoccluded id switch); without it the sliver joins the gone car's track."""
+    rng = np.random.default_rng(41)
+    car = Body(rng, 1001, 80, (4.0, 1.5, 1.5))
+    front = np.flatnonzero(car.X_b[:, 0] < -1.0)
+    T_car = [make_pose(np.eye(3), np.array([-2.0 - 0.5 * i, 0.5, 10.0])) for i in range(6)]  # the border: x -5.2 m
+    other = Body(rng, 1002, 0, (1.0, 1.0, 1.0))
+    other.X_b = np.array([[0.1, -0.35, 0.0], [0.3, 0.0, 0.0], [0.2, 0.2, 0.0]])  # u 0-15 px at 6 m
+    other.desc = rng.integers(0, 256, (3, 32)).astype(np.uint8)
+    objects, trk = ObjectMap(), tracker(f"objects.border_exit_drops_last_box={str(rule).lower()}")
+    for i in range(3):
+        (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
+    cut = make_frame(3, [(car.part(front), T_car[3])])
+    trk.track(cut, mask_of_keypoints(cut, left_edge=True), objects)
+    tr = objects.tracks[e.track_id]
+    assert tr.last.frame_index == 3 and tr.last.box2d[0] == 0 and tr.velocity_known
+    frame = make_frame(5, [(other, make_pose(np.eye(3), np.array([-3.2, 0.5, 6.0])))])
+    box = trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    assert box is not None and box[0] == box[2] == 0.0  # gone, its extent still in view
+    sliver = mask_of_keypoints(frame, left_edge=True)
+    assert box_iou(instance_boxes(sliver, np.array([1002])), np.asarray(tr.last.box2d)[None])[0, 0] > 0.3
+    trk.track(frame, sliver, objects)
+    assert tr.last.frame_index == (3 if rule else 5)
+
+
 def test_a_car_predicted_just_outside_the_image_stays_a_candidate_within_its_uncertainty():
     """Crossing s99 f42: a car at the left border (its box a sliver there) whose prediction put its 3D extent 2 px
     outside the image, at a position sigma of ~7 px there: `predicted_box` called it gone and a new track took the

@@ -255,7 +255,8 @@ class BoxAssociation:
         take it; ranked by the IoU less the gallery distance (DeepSORT's appearance in the cost: a neighbour's box
         over a person's predicted one does not outbid its own, partly hidden one);
         "box": by that or the overlap of its last box (`_last_box`: a wrong velocity, or a near object whose origin
-        projects off its visible part, moves the box wrong), ranked alike;
+        projects off its visible part, moves the box wrong), ranked alike; not by the last box of a track that has
+        left by an image border (`_left_by_border`, objects.border_exit_drops_last_box);
         "gate": by the Mahalanobis distance (`_gate_distance` <= box_gate_chi2) to a velocity-known track whose
         moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
         car passing the camera, a box clipped to the image border);
@@ -290,6 +291,8 @@ class BoxAssociation:
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)
+        if cfg.border_exit_drops_last_box:
+            iou_last[:, self._left_by_border(recent, moved, last)] = 0.0
         touching = (iou_moved > 0) | (iou_last > 0)
         vetoed, owners = self._in_another_extent(objects, recent, pred, X_w, free & touching)
         free &= ~vetoed & ~self._jumps(frame, objects, recent, pred, X_w, free & touching)
@@ -416,6 +419,16 @@ class BoxAssociation:
         r = 0.5 * (boxes[:, :2] + boxes[:, 2:] - moved[:2] - moved[2:])
         d2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[:, :, None])[:, :, 0])
         return np.where(np.isfinite(d2), d2, np.inf)
+
+    def _left_by_border(self, tracks: list[ObjectTrack], moved: np.ndarray, last: np.ndarray) -> np.ndarray:
+        """(T,) whether each velocity-known track has left the view by an image border: its moved box was clipped
+        from wholly outside the image (zero width or height; `predicted_box` keeps it for its 3D extent still in
+        view) and its last box touches the border. Its last box there is where the next object entering appears
+        (crossing s99 f77: a van gone by the left border took the van entering there by its last box)."""
+        w, h = self.camera.width - 1, self.camera.height - 1
+        clipped = (moved[:, 2] <= moved[:, 0]) | (moved[:, 3] <= moved[:, 1])
+        at_border = (last[:, 0] <= 0) | (last[:, 1] <= 0) | (last[:, 2] >= w) | (last[:, 3] >= h)
+        return clipped & at_border & np.array([tr.velocity_known for tr in tracks], dtype=bool)
 
     def _last_box(self, track: ObjectTrack, timestamp: float) -> np.ndarray:
         """The track's last box as it was; without a known velocity (its 3D prediction stands still), moved on at
