@@ -1187,15 +1187,13 @@ def test_a_car_whose_last_seen_part_has_left_the_image_keeps_its_track_by_the_pa
     assert e7.track_id == e.track_id and list(objects.tracks) == [e.track_id]
 
 
-def mask_of_keypoints(frame: Frame, left_edge: bool) -> np.ndarray:
-    """An instance image holding each instance's keypoint box, from the left image border when `left_edge` (an
-    instance cut by it: its mask reaches the border, its keypoints need not)."""
+def mask_cut_by_left_border(frame: Frame) -> np.ndarray:
+    """An instance image holding each instance's keypoint box widened to the left image border (an instance cut by
+    it: its mask reaches the border, its keypoints need not)."""
     instances = np.zeros((CAMERA.height, CAMERA.width), np.int64)
-    for inst in np.unique(frame.instance_id):
-        uv = frame.keypoints.uv[frame.instance_id == inst]
-        u0, v0 = (0, uv[:, 1].min()) if left_edge else uv.min(axis=0)
-        u1, v1 = uv.max(axis=0)
-        instances[int(v0):int(v1) + 1, int(u0):int(u1) + 1] = inst
+    inst_ids = np.unique(frame.instance_id)
+    for inst, (_, v0, u1, v1) in zip(inst_ids.tolist(), keypoint_boxes(frame, frame.instance_id > 0, inst_ids)):
+        instances[int(v0):int(v1) + 1, :int(u1) + 1] = inst
     return instances
 
 
@@ -1218,13 +1216,13 @@ def test_a_car_gone_by_the_border_is_not_joined_by_its_last_box_to_the_next_one_
     for i in range(3):
         (e,) = trk.track(make_frame(i, [(car, T_car[i])]), None, objects).estimates
     cut = make_frame(3, [(car.part(front), T_car[3])])
-    trk.track(cut, mask_of_keypoints(cut, left_edge=True), objects)
+    trk.track(cut, mask_cut_by_left_border(cut), objects)
     tr = objects.tracks[e.track_id]
     assert tr.last.frame_index == 3 and tr.last.box2d[0] == 0 and tr.velocity_known
     frame = make_frame(5, [(other, make_pose(np.eye(3), np.array([-3.2, 0.5, 6.0])))])
     box = trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
     assert box is not None and box[0] == box[2] == 0.0  # gone, its extent still in view
-    sliver = mask_of_keypoints(frame, left_edge=True)
+    sliver = mask_cut_by_left_border(frame)
     assert box_iou(instance_boxes(sliver, np.array([1002])), np.asarray(tr.last.box2d)[None])[0, 0] > 0.3
     trk.track(frame, sliver, objects)
     assert tr.last.frame_index == (3 if rule else 5)
