@@ -488,7 +488,7 @@ def test_object_creation_thresholds():
                                        ("appearance_bins", 0), ("appearance_bins", 17), ("appearance_gallery", 0),
                                        ("translation_only_classes", "[bike]"), ("join_owner_extent_fraction", 1.5),
                                        ("mask_depth_classes", "[bike]"), ("mask_depth_max_m", 0),
-                                       ("pedestrian_coast_max_s", -0.1)])
+                                       ("pedestrian_coast_max_s", -0.1), ("border_cut_length_m.van", -1)])
 def test_objects_config_validation(key, value):
     from dynaslam2.errors import ConfigError
 
@@ -1226,6 +1226,35 @@ def test_a_car_gone_by_the_border_is_not_joined_by_its_last_box_to_the_next_one_
     assert box_iou(instance_boxes(sliver, np.array([1002])), np.asarray(tr.last.box2d)[None])[0, 0] > 0.3
     trk.track(frame, sliver, objects)
     assert tr.last.frame_index == (3 if rule else 5)
+
+
+@pytest.mark.parametrize("cut, van_length", [(True, 4.8), (True, 0.0), (False, 4.8)])
+def test_a_van_cut_by_the_border_keeps_its_track_when_its_unseen_far_end_comes_into_view(cut, van_length):
+    """A van 5 m long stands at the left image border, only its near 2.7 m in view, its mask cut by the border; a
+    nearer vehicle hides it for 0.3 s while the camera turns 28 deg left; then its far end, never mapped, comes out
+    alone, with other descriptors (no point votes), beside its predicted box and off its last box. With
+    objects.border_cut_length_m the extent of a track last seen cut by the border is completed to its class's length
+    away from the camera, holds the far end's points, and the track keeps its van (traffic s39 f130); without the
+    length, or with its last box inside the image (its extent not known to be cut), a new track is begun."""
+    rng = np.random.default_rng(5)
+    van = Body(rng, 3001, 240, (5.0, 2.0, 2.0))
+    T_van = make_pose(np.eye(3), np.array([-5.0, 0.5, 10.0]))  # still; the border at x -5.19 m at z 10 m
+    objects, trk = ObjectMap(), tracker(f"objects.border_cut_length_m.van={van_length}")
+    for i in range(5):
+        frame = make_frame(i, [(van, T_van)])
+        (e,) = trk.track(frame, mask_cut_by_left_border(frame) if cut else None, objects).estimates
+    tr = objects.tracks[e.track_id]
+    assert tr.velocity_known and (tr.last.box2d[0] == 0) == cut
+    for i in range(5, 8):
+        trk.track(make_frame(i, []), None, objects)
+    T_c_w = inverse(make_pose(so3_exp(np.array([0.0, -np.radians(28.0), 0.0])), np.zeros(3)))
+    far_end = van.part(van.X_b[:, 0] < -1.0, rng=rng)
+    frame = make_frame(8, [(far_end, T_van)], T_c_w)
+    moved = trk.boxes.predicted_box(tr, frame, trk.predicted_pose(tr, frame.timestamp), objects)
+    box = keypoint_boxes(frame, frame.instance_id > 0, np.array([3001]))
+    assert box_iou(box, np.array([moved, tr.last.box2d])).max() < 0.5 * trk.cfg.join_iou
+    (e8,) = trk.track(frame, None, objects).estimates
+    assert (e8.track_id == e.track_id) == (cut and van_length > 0)
 
 
 def test_a_car_predicted_just_outside_the_image_stays_a_candidate_within_its_uncertainty():

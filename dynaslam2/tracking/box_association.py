@@ -261,7 +261,8 @@ class BoxAssociation:
         moved box overlaps the instance's (the overlap bounds the gate where the projected covariance is large: a
         car passing the camera, a box clipped to the image border);
         "extent": by the fraction of the instance's stereo points `X_w` inside a velocity-known vehicle track's
-        predicted 3D extent (`extent_fraction` >= extent_min_fraction, or >= join_owner_extent_fraction for the track
+        predicted 3D extent, its length completed when its last box was cut by a side image border
+        (`_length_completed`; `extent_fraction` >= extent_min_fraction, or >= join_owner_extent_fraction for the track
         whose extent held an instance vetoed from another, objects.join_vetoed_to_owner; a pedestrian's grown extent
         holds its neighbour);
         "young": likewise to a track without a velocity (its 3D prediction stands still) whose `_last_box` overlaps
@@ -309,7 +310,7 @@ class BoxAssociation:
                         if recent[t].velocity_known and recent[t].cls in VEHICLE_CLASSES:
                             rows = np.flatnonzero(cand[:, t])
                             cost[rows, t] = -self.extent_fraction(objects, recent[t], pred[recent[t].track_id],
-                                                                  [X_w[k] for k in rows])
+                                                                  [X_w[k] for k in rows], complete_length=True)
                 ok = (cost < 0) & ((-cost >= cfg.extent_min_fraction) | owners & cfg.join_vetoed_to_owner)
             elif stage == "appearance":
                 cost = np.full(cand.shape, np.inf)
@@ -391,12 +392,14 @@ class BoxAssociation:
         return out
 
     def extent_fraction(self, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray,
-                        X_w: list[np.ndarray]) -> np.ndarray:
-        """Fraction of each instance's world points `X_w` inside the track's 3D extent (`_extent`) at its predicted
-        pose, grown by extent_margin_m (0 without points)."""
+                        X_w: list[np.ndarray], complete_length: bool = False) -> np.ndarray:
+        """Fraction of each instance's world points `X_w` inside the track's 3D extent (`_extent`; with
+        `complete_length`, `_length_completed`) at its predicted pose, grown by extent_margin_m (0 without points)."""
         extent = _extent(objects, track)
         if extent is None:
             return np.zeros(len(X_w))
+        if complete_length:
+            extent = self._length_completed(track, extent)
         lo, hi = extent[0] - self.cfg.extent_margin_m, extent[1] + self.cfg.extent_margin_m
         T_o_w = inverse(T_w_o_pred)
         return np.array([np.all((P >= lo) & (P <= hi), axis=1).mean() if len(P) else 0.0
@@ -419,6 +422,30 @@ class BoxAssociation:
         r = 0.5 * (boxes[:, :2] + boxes[:, 2:] - moved[:2] - moved[2:])
         d2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[:, :, None])[:, :, 0])
         return np.where(np.isfinite(d2), d2, np.inf)
+
+    def _length_completed(self, track: ObjectTrack, extent: tuple[np.ndarray, np.ndarray]
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """The vehicle track's extent with its longer horizontal axis (object-frame x or z: the object frame starts
+        with the world's axes, the first camera's, y down) grown to its class's length (objects.border_cut_length_m)
+        on the side away from the camera of its last observation, when that observation's box was cut by the left
+        or right image border: the part beyond the border was never mapped (traffic s39: a stopped van at the left
+        border, its points 0.3-3.4 m along its length, reappeared from behind a nearer van by its far end, 3.3-5.9
+        m). Otherwise the extent as it is."""
+        length = getattr(self.cfg.border_cut_length_m, track.cls, 0.0)
+        last = track.last
+        if (length <= 0 or last.box2d is None or last.T_c_w is None
+                or not (last.box2d[0] <= 0 or last.box2d[2] >= self.camera.width - 1)):
+            return extent
+        lo, hi = extent[0].copy(), extent[1].copy()
+        axis = 0 if hi[0] - lo[0] >= hi[2] - lo[2] else 2
+        grow = length - (hi[axis] - lo[axis])
+        if grow > 0:
+            camera_o = inverse(last.T_w_o)[:3] @ np.r_[inverse(last.T_c_w)[:3, 3], 1.0]  # its centre, object frame
+            if camera_o[axis] < 0.5 * (lo[axis] + hi[axis]):
+                hi[axis] += grow
+            else:
+                lo[axis] -= grow
+        return lo, hi
 
     def _left_by_border(self, tracks: list[ObjectTrack], moved: np.ndarray, last: np.ndarray) -> np.ndarray:
         """(T,) whether each velocity-known track has left the view by an image border: its moved box was clipped
