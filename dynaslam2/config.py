@@ -707,7 +707,7 @@ class ObjectsConfig:
     # stopped van at the left border, its far end never mapped (points 0.3-3.4 m along its length), came out from
     # behind a nearer van by that end (3.3-5.9 m; 0.23 of its points in the extent) and began a new track. Lengths
     # at the short end of each class (the sim's cars 3.8-4.7 m, vans 4.8-5.4, trucks 7-9), first choices, not tuned.
-    # Off -> on (world 4, 150 fr, 640x480; 205 sequences, every group but crossing 70-129): two change, traffic s39
+    # Off -> on (world 4, 150 fr, 640x480; 242 sequences, all but crossing 121-129): two change, traffic s39
     # (short gaps kept 0 -> 1 of 1, TP 0.911 -> 0.930, object ATE 0.129 -> 0.135 m) and crossing s34 (21 -> 22 of 22,
     # 0.805 -> 0.811, 0.255 -> 0.268 m: gt14, a van hidden 0.7 s behind a truck at the left border); ego ATE
     # unchanged. Grown for every vehicle track, not only one cut by the border, it changed 6 of 43 sequences:
