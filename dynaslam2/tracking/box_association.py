@@ -440,7 +440,7 @@ class BoxAssociation:
         axis = 0 if hi[0] - lo[0] >= hi[2] - lo[2] else 2
         grow = length - (hi[axis] - lo[axis])
         if grow > 0:
-            camera_o = inverse(last.T_w_o)[:3] @ np.r_[inverse(last.T_c_w)[:3, 3], 1.0]  # its centre, object frame
+            camera_o = inverse(last.T_c_w @ last.T_w_o)[:3, 3]  # the camera centre in the object frame
             if camera_o[axis] < 0.5 * (lo[axis] + hi[axis]):
                 hi[axis] += grow
             else:
