@@ -888,6 +888,14 @@ class ObjectsConfig:
     # the mixed groups' object ATE within -0.017 / +0.009 m. Against the origin itself (the mask's centre taken as
     # the origin): s41 gt19 0.06 -> 0.97 m, its origin, 3 m behind the person from its first points at 35 m, moved
     # onto the body mid-track. Vehicles measured against their points (the coasting rule): worse on 17 of 21 seeds.
+    # A coasting person's mask that its points cannot place (fewer than register_min_matches points found again
+    # inside it: a walking person's points are seldom found again) is measured by its centre as well: crossing s92
+    # gt24, in full view at 17 m, had run 1-3 m off on a stale prediction for 1.7 s, its mask measurements then
+    # refused by the gate, and lost its track at a brief occlusion. At 3e7a486 without -> with, every group (250
+    # sequences; README): crossing s72's unoccluded switch gone (none left), short gaps lost 14 of 1011 -> 11 of 1014
+    # (kept s3, s21, s92, one of s90's two; lost s22's), object ATE lower on 66, higher on 97 (mean -2.4 mm; 25-29
+    # 0.204 -> 0.156 m, crossing 40-54 0.230 -> 0.244 m). Its cost: a centre measurement moves the origin with the
+    # visible part of a partly hidden person (s119 gt21, standing behind a car: 1 m up, 0.18 -> 0.71 m).
     mask_measurement: bool = True
     mask_min_pixels: int = 30
     mask_min_ncc: float = 0.5

@@ -1888,6 +1888,29 @@ def test_a_person_box_joined_without_a_registration_is_measured_by_its_mask(mask
     assert (moved < 0.05) if mask_depth else (moved > 0.4), moved
 
 
+def test_a_coasting_person_whose_points_are_never_found_again_is_measured_by_its_mask_centre():
+    """A person walks 1.4 m/s across at 12 m for 5 frames showing new keypoints every frame (its points are never
+    matched again: its box joins are measured by its mask's centre), then stands showing 2 of them (coasting): its
+    points cannot place it in its mask (none was found again), so its mask's centre measures it (every coasting
+    frame measured, and it stands: frames 8-11 under 5 cm); with its points alone, the coasting frames went
+    unmeasured and carried the walking prediction on (0.3 m in frames 8-11; crossing s92 gt24 f53-f68, an
+    unoccluded person at 17 m, ran 1-3 m off)."""
+    rng = np.random.default_rng(8)
+    person = Body(rng, 2001, 40, (0.6, 1.7, 0.5))
+    T = [make_pose(np.eye(3), np.array([-1.0 + 0.14 * min(i, 4), 0.5, 12.0])) for i in range(12)]
+    objects, trk = ObjectMap(), tracker("objects.mask_depth_classes=[pedestrian]")
+    image = np.zeros((CAMERA.height, CAMERA.width), np.uint8)
+    for i in range(12):
+        body = person.part(np.arange(40 if i < 5 else 2), rng=rng)
+        instances, depth = rendered_masks([(person, T[i])])
+        trk.track(make_frame(i, [(body, T[i])]), instances, objects, image, depth_image=depth)
+    (tr,) = objects.tracks.values()
+    assert [o.frame_index for o in tr.observations] == list(range(12))
+    assert all(o.measured for o in tr.observations[5:])
+    moved = np.linalg.norm(tr.observations[11].T_w_o[:3, 3] - tr.observations[8].T_w_o[:3, 3])
+    assert moved < 0.05, moved
+
+
 @pytest.mark.parametrize("kf_points_all_objects", [True, False])
 def test_a_keyframe_gives_a_tracked_object_the_points_it_shows(kf_points_all_objects):
     """A car tracked from its rear half shows its front half at a keyframe where its tracking is not weak: with

@@ -662,8 +662,9 @@ class ObjectTracker:
         instance outside its predicted extent adds no points (`_outside_extent`, join_points_min_extent_fraction). An
         instance with fewer than min_inliers close keypoints (coasting) adds no points; its mask measures the track's
         position instead when it can (`masks`, `_mask_register`). A person's (mask_depth_classes) whose keypoints do
-        not register measures it by its mask's centre (`_mask_centre_register`; a walking person's keypoints seldom
-        match the points it showed before: without, its box joins carried a still prediction on for seconds)."""
+        not register, or whose points cannot place it in its coasting mask, measures it by its mask's centre
+        (`_mask_centre_register`; a walking person's keypoints seldom match the points it showed before: without,
+        its box joins carried a stale prediction on for seconds)."""
         kp, X_w, _ = points
         if len(kp) < self.cfg.min_inliers:
             kp, X_w = kp[:0], X_w[:0]
@@ -835,19 +836,23 @@ class ObjectTracker:
         position filter's validation gate at mask_gate_nis passes (a mask's disparity can take a wrong peak: one
         found 5 m for a person at 22 m); else the prediction, no match and None (also without the filter's state).
         (A box join's points made at a wrong prediction carry wrong depths: 3 of a person's 6 at 14-16 m against
-        18.6 m, crossing s40 f40, moved its mask measurement 3 m.) `by_centre`: the mask's centre against the body
-        point it was first found at (`_mask_centre_register`), whatever the track's points."""
+        18.6 m, crossing s40 f40, moved its mask measurement 3 m.) `by_centre`, or a person's (mask_depth_classes)
+        mask that its points cannot place (fewer than register_min_matches inside: a walking person's points are
+        seldom found again; crossing s92 gt24, unoccluded at 17 m, ran 1-3 m off on a stale prediction for 1.7 s):
+        the mask's centre against the body point it was first found at (`_mask_centre_register`), whatever the
+        track's points."""
         cfg = self.cfg
         none = np.zeros(0, np.int64)
         if masks is None or not cfg.filter or track.state_mean is None:
             return T_w_o_pred, none, none, None
-        if by_centre:
-            measured = self._mask_centre_register(frame, track, T_w_o_pred, masks, inst, box)
-        else:
+        measured = None
+        if not by_centre:
             pts = objects.points.of_track(track.track_id)
             again = objects.points.n_found[pts] >= 3  # 1 when added, 2 after the observation that made it
             X_o = objects.points.X_o[pts[again]] if len(pts) >= cfg.min_inliers else None
             measured = masks.position(frame, T_w_o_pred, X_o, inst, box, cfg.register_min_matches)
+        if measured is None and (by_centre or track.cls in cfg.mask_depth_classes):
+            measured = self._mask_centre_register(frame, track, T_w_o_pred, masks, inst, box)
         if measured is None or gated(track, frame.timestamp - track.last.timestamp, measured[0],
                                      lambda: measured[1], cfg, cfg.mask_gate_nis):
             return T_w_o_pred, none, none, None
