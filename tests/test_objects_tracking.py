@@ -2077,3 +2077,37 @@ def test_a_pose_claim_spares_the_track_begun_for_a_person_at_mask_depth(mask_dep
     old, young = lost_and_begun_again(trk, objects, person, T, range(5, 17), rng)
     (e,) = trk.track(make_frame(20, [(person, T[20])]), None, objects).estimates
     assert e.track_id == (young if mask_depth else old)
+
+
+@pytest.mark.parametrize("coasting, colour, depth_error_m, joined", [
+    (False, (200, 30, 30), 0.0, False), (True, (200, 30, 30), 0.0, True), (True, (30, 30, 200), 0.0, False),
+    (True, (200, 30, 30), 5.0, False)])
+def test_a_person_back_as_a_sliver_beside_its_moved_box_is_reidentified_by_appearance(coasting, colour,
+                                                                                        depth_error_m, joined):
+    """A pedestrian walking across at 1 m/s at 15 m was last seen by its upper third, then hidden for 0.6 s; it
+    comes back as its lower half alone, 4 keypoints with new descriptors (coasting: < min_inliers), below its moved
+    box and beside its last one, overlapping neither (crossing s62 f34: a head sliver's moved box above the legs'
+    box). Its colours match its track's gallery and its box lies within the gate of its predicted box: with
+    objects.appearance_reid_coasting it joins its track ("coast-appearance"), measured by its mask; without, it
+    joins nothing, nor in other colours, nor when its mask's depth lies 5 m behind (another person's sliver: a join
+    its mask cannot measure is refused, crossing s5 f10-f22)."""
+    rng = np.random.default_rng(9)
+    walker = Body(rng, 2001, 60, (0.5, 1.7, 0.4))
+    at = [make_pose(np.eye(3), np.array([-2.0 + 0.1 * i, 0.6, 15.0])) for i in range(13)]
+    objects = ObjectMap()
+    trk = tracker("objects.appearance_max_distance=0.4", f"objects.appearance_reid_coasting={coasting}")
+
+    def seen(frame: Frame, colours: dict[int, tuple], depth_m: float) -> None:
+        instances, image = painted(frame, colours)
+        trk.track(frame, instances, objects, image, depth_image=np.where(instances > 0, depth_m, 0.0).astype(np.float32))
+
+    for i in range(6):
+        body = walker if i < 5 else walker.part(np.flatnonzero(walker.X_b[:, 1] < -0.3))
+        seen(make_frame(i, [(body, at[i])]), {2001: (200, 30, 30)}, 15.0)
+    (first,) = objects.tracks
+    for i in range(6, 12):
+        trk.track(make_frame(i, []), None, objects)
+    lower = np.flatnonzero(walker.X_b[:, 1] > 0.0)
+    legs = walker.part(lower[np.argsort(walker.X_b[lower, 1])[[0, 1, -2, -1]]], inst=2002, rng=rng)
+    seen(make_frame(12, [(legs, at[12])]), {2002: colour}, 15.0 + depth_error_m)
+    assert (objects.tracks[first].last.instance_id == 2002) == joined

@@ -25,7 +25,8 @@ person's within `pedestrian_report_coast_s`). Last, an instance still unclaimed 
 velocity yet) within the gate of its last box. No claim, vote or box join gives a
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
 `objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
-its colours and the gate (`objects.appearance_reid_distance`). A tentative track (fewer than
+its colours and the gate (`objects.appearance_reid_distance`), and so does an instance with too few keypoints
+within pedestrian_coast_max_s when its mask measures the track (`objects.appearance_reid_coasting`). A tentative track (fewer than
 `objects.min_output_observations` observations) that finds nothing in a frame is deleted.
 """
 
@@ -386,21 +387,23 @@ class ObjectTracker:
                 held.append(k)
         # Last, the young pedestrian tracks without a velocity, by their gate (a group's pedestrian hidden before its
         # track had one, crossing s10), then people's tracks lost within max_lost_s by their appearance (re-anchored
-        # on the instance); then the instances left become new objects.
+        # on the instance), and the coasting instances by it too when their mask measures the track; then the
+        # instances left become new objects.
         gated = [k for k in held if enough[k]]
         unseen = [tr for tr in active if tr.track_id not in seen]
         late = assign(unseen, gated, cfg.join_max_gap_s, ("young",))
         lost = [k for k in gated if late[k] is None]
         reidentified = set()
-        if looks is not None and cfg.appearance_reid_distance > 0 and lost:
+        slivers = [k for k in held if not enough[k]] if cfg.appearance_reid_coasting else []  # (vehicles: no gallery)
+        if looks is not None and cfg.appearance_reid_distance > 0 and (lost or slivers):
             taken = {tr.track_id for tr in late.values() if tr is not None}
-            late.update(assign([tr for tr in unseen if tr.track_id not in taken], lost, cfg.max_lost_s,
-                               ("appearance",)))
+            late.update(assign([tr for tr in unseen if tr.track_id not in taken], lost + slivers, cfg.max_lost_s,
+                               ("appearance", "coast-appearance")))
             reidentified = {k for k in lost if late[k] is not None}
         for k in held:
             inst, tr = int(inst_ids[k]), late.get(k)
             tid = (self._box_join(frame, objects, tr, pred[tr.track_id], inst, points[k], boxes[k], free, masks,
-                                  reanchor=k in reidentified)
+                                  reanchor=k in reidentified, measured_only=k in slivers)
                    if tr is not None else self._create(
                        frame, objects, inst, points[k], boxes[k], free,
                        masks if self._may_begin_at_mask_depth(frame, objects, active, seen, pred, inst, boxes[k])
@@ -652,7 +655,8 @@ class ObjectTracker:
 
     def _box_join(self, frame: Frame, objects: ObjectMap, track: ObjectTrack, T_w_o_pred: np.ndarray, inst: int,
                   points: tuple[np.ndarray, np.ndarray, int], box: np.ndarray, free: np.ndarray,
-                  masks: MaskMeasurement | None = None, reanchor: bool = False) -> int:
+                  masks: MaskMeasurement | None = None, reanchor: bool = False, measured_only: bool = False
+                  ) -> int | None:
         """The instance joins `track` by its box (`BoxAssociation.assign`): the track goes on at its
         constant-velocity prediction, translated by the registration on the keypoints that match its points
         (`_register`; a measurement of its position for the filter, with the registration's information); the
@@ -664,11 +668,15 @@ class ObjectTracker:
         position instead when it can (`masks`, `_mask_register`). A person's (mask_depth_classes) whose keypoints do
         not register, or whose points cannot place it in its coasting mask, measures it by its mask's centre
         (`_mask_centre_register`; a walking person's keypoints seldom match the points it showed before: without,
-        its box joins carried a stale prediction on for seconds)."""
+        its box joins carried a stale prediction on for seconds). With `measured_only` (a coasting instance that
+        joined by its colours alone, objects.appearance_reid_coasting) a join its mask does not measure is refused:
+        None (in colours alike, a neighbour's sliver 5 m behind took a person's track, crossing s5 f10-f22)."""
         kp, X_w, _ = points
         if len(kp) < self.cfg.min_inliers:
             kp, X_w = kp[:0], X_w[:0]
             T_w_o, kp_in, pt_in, info = self._mask_register(frame, objects, track, T_w_o_pred, masks, inst, box)
+            if measured_only and info is None:
+                return None
         else:
             T_w_o, kp_in, pt_in, info = self._register(frame, objects, track, T_w_o_pred, kp, X_w)
             if info is None and track.cls in self.cfg.mask_depth_classes:
