@@ -26,8 +26,8 @@ velocity yet) within the gate of its last box. No claim, vote or box join gives 
 person's track an instance whose colour histogram is far from all of its recent ones (`appearance`,
 `objects.appearance_max_distance`); an instance left over re-identifies a person's track lost within max_lost_s by
 its colours and the gate (`objects.appearance_reid_distance`), and so does an instance with too few keypoints
-within pedestrian_coast_max_s when its mask measures the track (`objects.appearance_reid_coasting`). A tentative track (fewer than
-`objects.min_output_observations` observations) that finds nothing in a frame is deleted.
+within pedestrian_coast_max_s when its mask measures the track (`objects.appearance_reid_coasting`). A tentative
+track (fewer than `objects.min_output_observations` observations) that finds nothing in a frame is deleted.
 """
 
 from __future__ import annotations
