@@ -2084,7 +2084,7 @@ def test_a_pose_claim_spares_the_track_begun_for_a_person_at_mask_depth(mask_dep
     (True, (200, 30, 30), 5.0, False)])
 def test_a_person_back_as_a_sliver_beside_its_moved_box_is_reidentified_by_appearance(coasting, colour,
                                                                                         depth_error_m, joined):
-    """A pedestrian walking across at 1 m/s at 15 m was last seen by its upper third, then hidden for 0.6 s; it
+    """A pedestrian walking across at 1 m/s at 15 m was last seen by its upper third, then hidden for 0.7 s; it
     comes back as its lower half alone, 4 keypoints with new descriptors (coasting: < min_inliers), below its moved
     box and beside its last one, overlapping neither (crossing s62 f34: a head sliver's moved box above the legs'
     box). Its colours match its track's gallery and its box lies within the gate of its predicted box: with
@@ -2099,7 +2099,8 @@ def test_a_person_back_as_a_sliver_beside_its_moved_box_is_reidentified_by_appea
 
     def seen(frame: Frame, colours: dict[int, tuple], depth_m: float) -> None:
         instances, image = painted(frame, colours)
-        trk.track(frame, instances, objects, image, depth_image=np.where(instances > 0, depth_m, 0.0).astype(np.float32))
+        depth = np.where(instances > 0, depth_m, 0.0).astype(np.float32)
+        trk.track(frame, instances, objects, image, depth_image=depth)
 
     for i in range(6):
         body = walker if i < 5 else walker.part(np.flatnonzero(walker.X_b[:, 1] < -0.3))
@@ -2110,4 +2111,6 @@ def test_a_person_back_as_a_sliver_beside_its_moved_box_is_reidentified_by_appea
     lower = np.flatnonzero(walker.X_b[:, 1] > 0.0)
     legs = walker.part(lower[np.argsort(walker.X_b[lower, 1])[[0, 1, -2, -1]]], inst=2002, rng=rng)
     seen(make_frame(12, [(legs, at[12])]), {2002: colour}, 15.0 + depth_error_m)
-    assert (objects.tracks[first].last.instance_id == 2002) == joined
+    last = objects.tracks[first].last
+    assert (last.instance_id == 2002) == joined
+    assert last.measured
