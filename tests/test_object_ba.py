@@ -475,6 +475,13 @@ def test_object_weak_only_keeps_static_points_and_old_keyframes():
     assert result.n_parameters["static_point"] == 0
 
 
+def test_the_temporal_tail_holds_a_keyframe_exactly_its_length_back():
+    """A keyframe exactly tail_seconds before the newest one is in the tail at any time of a sequence (9.8 - 2.0
+    rounds to 7.800000000000001, above 7.8: `time_windows.within`)."""
+    assert temporal_tail(np.array([0.0, 0.5, 2.0]), 2.0).tolist() == [True, True, True]
+    assert temporal_tail(np.array([7.7, 7.8, 9.8]), 2.0).tolist() == [False, True, True]
+
+
 def test_constant_velocity_prediction_is_exact_on_a_constant_velocity_trajectory():
     rng = np.random.default_rng(13)
     v_o, w_o = np.array([0.4, -0.1, 9.0]), np.array([0.02, 0.25, -0.03])

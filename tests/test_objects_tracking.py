@@ -2114,3 +2114,23 @@ def test_a_person_back_as_a_sliver_beside_its_moved_box_is_reidentified_by_appea
     last = objects.tracks[first].last
     assert (last.instance_id == 2002) == joined
     assert last.measured
+
+
+@pytest.mark.parametrize("last_seen", [8, 90])
+def test_an_object_hidden_for_exactly_the_join_window_keeps_its_track_at_any_time(last_seen):
+    """A car crossing at 12 m is hidden for join_max_gap_s (0.8 s) and comes back showing a new appearance (none of
+    its points match again: a box join). It keeps its track whether its frames' timestamps differ by 0.8 (frames 8
+    -> 16) or by 0.8000000000000007 (frames 90 -> 98: `time_windows.within`; crossing s49, a person hidden from 9.0
+    to 9.8 s, was given a new track)."""
+    rng = np.random.default_rng(4)
+    car = Body(rng, 1001, 120, (4.0, 1.5, 1.8))
+    first, back = last_seen - 5, last_seen + 8
+    T = {i: make_pose(np.eye(3), np.array([-3.0 + 0.5 * (i - first), 0.5, 12.0])) for i in range(first, back + 1)}
+    objects, trk = ObjectMap(), tracker()
+    for i in range(first, last_seen + 1):
+        trk.track(make_frame(i, [(car, T[i])]), None, objects)
+    for i in range(last_seen + 1, back):
+        trk.track(make_frame(i, []), None, objects)
+    (e,) = trk.track(make_frame(back, [(car.part(np.arange(120), rng=rng), T[back])]), None, objects).estimates
+    (tr,) = objects.tracks.values()
+    assert e.track_id == tr.track_id and tr.last.frame_index == back

@@ -61,6 +61,7 @@ from dynaslam2.eval.trajectory import rpe
 from dynaslam2.geometry.se3 import inverse
 from dynaslam2.io.sequence import Sequence
 from dynaslam2.io.types import ObjectEstimate, ObjectState
+from dynaslam2.time_windows import within
 
 
 @dataclass(frozen=True)
@@ -293,7 +294,7 @@ def _switches(frames: np.ndarray, assigned: list[int | None], timestamps: np.nda
     runs = [[a for a in assigned[i:j] if a is not None] for i, j in zip(starts[:-1], starts[1:])]
     gaps = [(timestamps[frames[j]] - timestamps[frames[j - 1]], r1[-1] if r1 else None, r2[0] if r2 else None)
             for j, r1, r2 in zip(starts[1:-1], runs[:-1], runs[1:])]
-    short = [(a1, a2) for dt, a1, a2 in gaps if dt <= short_gap_s + 1e-9 and a1 is not None and a2 is not None]
+    short = [(a1, a2) for dt, a1, a2 in gaps if within(dt, short_gap_s) and a1 is not None and a2 is not None]
     return {"id_switches": len(id_switch_frames), "reid_switches": len(reid_switch_frames),
             "id_switch_frames": id_switch_frames, "reid_switch_frames": reid_switch_frames,
             "max_gap_s": float(max((dt for dt, _, _ in gaps), default=0.0)),

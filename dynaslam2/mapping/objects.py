@@ -20,6 +20,7 @@ from dynaslam2.map.keyframe import KeyFrame
 from dynaslam2.map.map import Map
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_ba import ObjectBAProblem, object_bundle_adjustment
+from dynaslam2.time_windows import within
 from dynaslam2.tracking.camera import rigid
 
 
@@ -90,7 +91,7 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
         free_ids, fixed_ids, pts = _static_window(kf, map_, config)
     else:
         free_ids = sorted({o.kf_id for t in tracks for o in t.observations
-                           if o.kf_id in map_.keyframes and o.timestamp >= kf.timestamp - tail})
+                           if o.kf_id in map_.keyframes and within(kf.timestamp - o.timestamp, tail)})
         fixed_ids, pts = [], np.zeros(0, dtype=np.int64)
     all_ids = list(free_ids) + list(fixed_ids)
     if not all_ids or not tracks:
@@ -101,7 +102,8 @@ def object_local_ba(kf: KeyFrame, map_: Map, objects: ObjectMap, weak: list[int]
     # Object observations in the window and their points (each object's points once).
     obs_list: list[tuple[int, ObjectObservation]] = []
     for k, tr in enumerate(tracks):
-        obs_list += [(k, o) for o in tr.observations if o.kf_id in in_window and o.timestamp >= kf.timestamp - tail]
+        obs_list += [(k, o) for o in tr.observations
+                     if o.kf_id in in_window and within(kf.timestamp - o.timestamp, tail)]
     if not obs_list:
         return {}
     P = objects.points

@@ -120,6 +120,7 @@ from dynaslam2.optim.object_factors import (
 from dynaslam2.optim.pose_only import pose_only_factor
 from dynaslam2.optim.reprojection import chi2_depth, chi2_thresholds, huber_cost, is_stereo
 from dynaslam2.optim.static_schur import StaticSchur, static_schur
+from dynaslam2.time_windows import within
 
 
 @dataclass
@@ -197,7 +198,7 @@ def temporal_tail(timestamps: np.ndarray, tail_seconds: float) -> np.ndarray:
     """(K,) bool: keyframes within `tail_seconds` of the newest one (the free cameras of the
     object-weak BA, paper III-D)."""
     timestamps = np.asarray(timestamps, dtype=float)
-    return timestamps >= timestamps.max() - tail_seconds
+    return within(timestamps.max() - timestamps, tail_seconds)
 
 
 def object_bundle_adjustment(problem: ObjectBAProblem, camera: StereoCamera, cfg: OptimConfig) -> ObjectBAResult:

@@ -19,6 +19,7 @@ from dynaslam2.geometry.camera import StereoCamera
 from dynaslam2.geometry.se3 import inverse, transform
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectTrack
+from dynaslam2.time_windows import within
 from dynaslam2.tracking.object_filter import gated, initial_speed_sigma, predict_state
 
 
@@ -67,7 +68,7 @@ def implausible_jump(track: ObjectTrack, timestamp: float, p_w: np.ndarray, cfg:
     prediction excludes it (`gated` at reanchor_gate_nis, `p_w` exact but for the position floor)."""
     measured = [o.timestamp for o in track.observations if o.measured]
     exact = np.eye(3) * 1e12
-    return bool(measured and timestamp - measured[-1] <= cfg.join_max_gap_s
+    return bool(measured and within(timestamp - measured[-1], cfg.join_max_gap_s)
                 and gated(track, timestamp - track.last.timestamp, p_w, lambda: exact, cfg, nis=cfg.reanchor_gate_nis))
 
 
@@ -193,7 +194,7 @@ class BoxAssociation:
             return None
         earlier = None  # the oldest boxed observation within the window, searched back from the newest
         for o in reversed(track.observations):
-            if last.timestamp - o.timestamp > self.cfg.box_velocity_window_s:
+            if not within(last.timestamp - o.timestamp, self.cfg.box_velocity_window_s):
                 break
             if o is not last and o.box2d is not None:
                 earlier = o
@@ -279,7 +280,7 @@ class BoxAssociation:
         joined: list[ObjectTrack | None] = [None] * len(boxes)
         if not len(boxes):
             return joined
-        recent = [tr for tr in tracks if frame.timestamp - tr.last.timestamp <= max_gap_s.max()]
+        recent = [tr for tr in tracks if within(frame.timestamp - tr.last.timestamp, max_gap_s.max())]
         moved = [self.predicted_box(tr, frame, pred[tr.track_id], objects) for tr in recent]
         recent, moved = [tr for tr, b in zip(recent, moved) if b is not None], [b for b in moved if b is not None]
         if not recent:
@@ -288,7 +289,7 @@ class BoxAssociation:
         last = np.array([self._last_box(tr, frame.timestamp) for tr in recent])
         open_box = np.all(np.isfinite(boxes), axis=1)
         free = open_box[:, None] & (np.array(classes)[:, None] == np.array([tr.cls for tr in recent])[None])
-        free &= np.array([frame.timestamp - tr.last.timestamp for tr in recent])[None] <= max_gap_s[:, None]
+        free &= within(np.array([frame.timestamp - tr.last.timestamp for tr in recent])[None], max_gap_s[:, None])
         look = np.zeros(free.shape) if looks is None else np.array([looks[tr.track_id] for tr in recent]).T
         free &= ~(look > cfg.appearance_max_distance)
         iou_moved, iou_last = self._join_overlap(boxes, moved), self._join_overlap(boxes, last)

@@ -48,6 +48,7 @@ from dynaslam2.io.types import ObjectEstimate, velocity_to_world
 from dynaslam2.map.frame import Frame
 from dynaslam2.map.objects import ObjectMap, ObjectObservation, ObjectTrack
 from dynaslam2.optim.object_pose import object_velocity, optimize_object_pose, predict_object_pose
+from dynaslam2.time_windows import within
 from dynaslam2.tracking.appearance import gallery_distance, instance_histograms
 from dynaslam2.tracking.box_association import (BoxAssociation, implausible_jump, instance_boxes, keypoint_boxes,
                                                   reanchored_pose)
@@ -93,7 +94,7 @@ def _seen_within(track: ObjectTrack, obs: ObjectObservation, window_s: float) ->
     """True when the last observation of `track` before `obs` that is not coasted lies within `window_s` of it."""
     for earlier in reversed(track.observations):
         if earlier.frame_index < obs.frame_index and not _coasted(earlier):
-            return obs.timestamp - earlier.timestamp <= window_s
+            return within(obs.timestamp - earlier.timestamp, window_s)
     return False
 
 
@@ -297,7 +298,7 @@ class ObjectTracker:
         boxes = (instance_boxes(instances, inst_ids) if instances is not None
                  else keypoint_boxes(frame, dyn, inst_ids))
         active = [tr for tr in objects.tracks.values()
-                  if tr.last.frame_index < frame.index and t - tr.last.timestamp <= cfg.max_lost_s]
+                  if tr.last.frame_index < frame.index and within(t - tr.last.timestamp, cfg.max_lost_s)]
         pred = {tr.track_id: self.predicted_pose(tr, t) for tr in active}
         hist = (instance_histograms(image, instances, inst_ids, cfg.appearance_bins, cfg.appearance_min_pixels)
                 if cfg.appearance_max_distance > 0 and image is not None and instances is not None else None)
@@ -500,7 +501,8 @@ class ObjectTracker:
         overlaps its (motion-compensated) last box most (the object was seen in the previous frames)."""
         cfg = self.cfg
         box = self.boxes.predicted_box(track, frame, T_w_o_pred, objects)
-        if frame.timestamp - track.last.timestamp > cfg.max_velocity_gap_s or box is None or len(inst_ids) == 0:
+        if (not within(frame.timestamp - track.last.timestamp, cfg.max_velocity_gap_s) or box is None
+                or len(inst_ids) == 0):
             return None
         iou = box_iou(box[None], boxes)[0]
         k = int(np.argmax(iou))
@@ -527,7 +529,7 @@ class ObjectTracker:
         known = False
         if last is not None:
             dt = frame.timestamp - last.timestamp
-            if measured and 0 < dt <= self.cfg.max_velocity_gap_s:
+            if measured and 0 < dt and within(dt, self.cfg.max_velocity_gap_s):
                 v_o, w_o = object_velocity(last.T_w_o, T_w_o, dt)
                 known = True
             elif not measured:
@@ -725,7 +727,8 @@ class ObjectTracker:
         (its last or predicted box touches `box`; such a track's person, briefly unmatched, would get a new id)."""
         cls = _instance_class(inst)
         return cls in self.cfg.mask_depth_classes and not any(
-            tr.cls == cls and tr.track_id not in seen and frame.timestamp - tr.last.timestamp <= self.cfg.join_max_gap_s
+            tr.cls == cls and tr.track_id not in seen
+            and within(frame.timestamp - tr.last.timestamp, self.cfg.join_max_gap_s)
             and self.boxes.touches(frame, objects, tr, pred[tr.track_id], box) for tr in active)
 
     def _at_mask_depth(self, frame: Frame, inst: int, box: np.ndarray, free: np.ndarray, masks: MaskMeasurement,
